@@ -1,0 +1,1 @@
+"""Machine profiles shipped with nurbsfeed (selected by name with `--machine NAME`)."""

@@ -1,0 +1,180 @@
+"""A validated NURBS curve and its vectorised evaluation (points, derivatives, curvature).
+
+C(u) = sum N_i,p(u) w_i P_i / sum N_i,p(u) w_i  (paper Eq. 1). Evaluation works on the homogeneous
+curve A(u) = sum N_i,p w_i P_i, W(u) = sum N_i,p w_i with scipy's BSpline, then the quotient rule
+(Piegl & Tiller A4.2):  C = A/W,  C' = (A' - W'C)/W,  C'' = (A'' - 2W'C' - W''C)/W.
+
+The single-parameter evaluator used inside the stepping loop is `geometry.kernel`; both are
+checked against a textbook evaluator that lives in the tests.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+from scipy.interpolate import BSpline
+
+from nurbsfeed.errors import CurveError
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class NurbsCurve:
+    """A clamped NURBS curve of degree >= 1 in 3-D (2-D input has z = 0).
+
+    knots: (n + degree + 2,) non-decreasing, clamped, any range; points: (n + 1, 3) Cartesian
+    (not pre-multiplied by the weights); weights: (n + 1,) positive. Build it with `build`, which
+    checks everything; the constructor itself is the unchecked path for already-valid arrays.
+    """
+
+    degree: int
+    knots: np.ndarray
+    points: np.ndarray
+    weights: np.ndarray
+    name: str = ""
+    _cache: dict = field(default_factory=dict, repr=False, compare=False)
+
+    @classmethod
+    def build(cls, degree: object, knots: object, points: object, weights: object = None,
+              name: str = "") -> "NurbsCurve":
+        """Check a user's curve field by field; raise CurveError naming the field and value."""
+        if isinstance(degree, bool) or not isinstance(degree, (int, np.integer)) or degree < 1:
+            raise CurveError(f"degree must be a whole number >= 1, not {degree!r}")
+        degree = int(degree)
+        try:
+            pts = np.array(points, dtype=float)
+        except (TypeError, ValueError):
+            raise CurveError("control points must be lists of 2 or 3 numbers") from None
+        if pts.ndim != 2 or pts.shape[1] not in (2, 3):
+            raise CurveError("control points must be lists of 2 or 3 numbers, "
+                             f"got an array of shape {pts.shape}")
+        if not np.all(np.isfinite(pts)):
+            bad = int(np.argwhere(~np.isfinite(pts))[0][0])
+            raise CurveError(f"control point {bad} is not finite: {pts[bad].tolist()}")
+        if pts.shape[1] == 2:
+            pts = np.column_stack([pts, np.zeros(len(pts))])
+        n_ctrl = len(pts)
+        if n_ctrl < degree + 1:
+            raise CurveError(f"a curve of degree {degree} needs at least {degree + 1} control "
+                             f"points, got {n_ctrl}")
+        if weights is None:
+            w = np.ones(n_ctrl)
+        else:
+            try:
+                w = np.array(weights, dtype=float)
+            except (TypeError, ValueError):
+                raise CurveError("weights must be numbers") from None
+            if w.shape != (n_ctrl,):
+                raise CurveError(f"{n_ctrl} control points need {n_ctrl} weights, "
+                                 f"got {w.size}")
+            bad_w = np.flatnonzero(~(np.isfinite(w) & (w > 0)))
+            if bad_w.size:
+                raise CurveError(f"weight {bad_w[0]} must be positive and finite, "
+                                 f"not {w[bad_w[0]]!r}")
+        try:
+            k = np.array(knots, dtype=float)
+        except (TypeError, ValueError):
+            raise CurveError("knots must be numbers") from None
+        check_knots(k, degree, n_ctrl)
+        return cls(degree, _readonly(k), _readonly(pts), _readonly(w), name)
+
+    # ---- basic facts -------------------------------------------------------------------------
+    @property
+    def u_min(self) -> float:
+        return float(self.knots[self.degree])
+
+    @property
+    def u_max(self) -> float:
+        return float(self.knots[-self.degree - 1])
+
+    @property
+    def n_ctrl(self) -> int:
+        return len(self.points)
+
+    @cached_property
+    def homogeneous(self) -> np.ndarray:
+        """(n+1, 4): w_i P_i and w_i, the form the kernels evaluate."""
+        return _readonly(np.column_stack([self.points * self.weights[:, None], self.weights]))
+
+    @cached_property
+    def span_breaks(self) -> np.ndarray:
+        """(m,) the distinct knot values from u_min to u_max, in order."""
+        return _readonly(np.unique(self.knots[self.degree:len(self.knots) - self.degree]))
+
+    @cached_property
+    def is_degenerate(self) -> bool:
+        """All control points equal: a curve of zero length."""
+        return bool(np.all(np.ptp(self.points, axis=0) == 0.0))
+
+    # ---- vectorised evaluation -------------------------------------------------------------------
+    @cached_property
+    def _spline(self) -> BSpline:
+        # Derivatives are evaluated with nu= (de Boor on the span), which, unlike
+        # BSpline.derivative(), accepts repeated interior knots (one-sided at the knot).
+        return BSpline(self.knots, self.homogeneous, self.degree, extrapolate=True)
+
+    def point(self, u: np.ndarray | float) -> np.ndarray:
+        """C(u): (N,) -> (N, 3), or () -> (3,)."""
+        h = self._spline(u)
+        return h[..., :3] / h[..., 3:4]
+
+    def derivatives(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """C, C', C'' at u: (N,) -> three (N, 3) arrays."""
+        spline = self._spline
+        h0 = spline(u)
+        h1 = spline(u, nu=1)
+        h2 = spline(u, nu=2) if self.degree >= 2 else np.zeros_like(h0)
+        w0, w1, w2 = h0[..., 3:4], h1[..., 3:4], h2[..., 3:4]
+        c0 = h0[..., :3] / w0
+        c1 = (h1[..., :3] - w1 * c0) / w0
+        c2 = (h2[..., :3] - 2.0 * w1 * c1 - w2 * c0) / w0
+        return c0, c1, c2
+
+    def speed(self, u: np.ndarray) -> np.ndarray:
+        """|C'(u)|: (N,) -> (N,)."""
+        h0, h1 = self._spline(u), self._spline(u, nu=1)
+        c1 = (h1[..., :3] - h1[..., 3:4] * h0[..., :3] / h0[..., 3:4]) / h0[..., 3:4]
+        return np.linalg.norm(c1, axis=-1)
+
+
+def curvature_from_derivatives(c1: np.ndarray, c2: np.ndarray) -> np.ndarray:
+    """kappa = |C' x C''| / |C'|^3: (N, 3), (N, 3) -> (N,); NaN where C' = 0."""
+    cross = np.linalg.norm(np.cross(c1, c2), axis=-1)
+    speed = np.linalg.norm(c1, axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(speed > 0.0, cross / speed**3, np.nan)
+
+
+def check_knots(k: np.ndarray, degree: int, n_ctrl: int) -> None:
+    """The knot-vector rules every controller enforces; one CurveError per rule."""
+    order = degree + 1
+    if k.ndim != 1 or k.size != n_ctrl + order:
+        raise CurveError(f"{n_ctrl} control points of degree {degree} need "
+                         f"{n_ctrl + order} knots (control points + order), got {k.size}")
+    if not np.all(np.isfinite(k)):
+        raise CurveError(f"knot {int(np.argmax(~np.isfinite(k)))} is not finite")
+    dec = np.flatnonzero(np.diff(k) < 0)
+    if dec.size:
+        i = int(dec[0]) + 1
+        raise CurveError(f"knots must not decrease: knot {i} ({k[i]:g}) < knot {i - 1} "
+                         f"({k[i - 1]:g})")
+    if np.any(k[:order] != k[0]) or np.any(k[-order:] != k[-1]):
+        raise CurveError(f"knot vector must be clamped: the first {order} and the last {order} "
+                         f"knots must be equal (order {order})")
+    if k[-1] <= k[0]:
+        raise CurveError(f"knot range is empty: all knots are {k[0]:g}")
+    interior = k[order:-order]
+    if interior.size:
+        values, counts = np.unique(interior, return_counts=True)
+        if np.any(counts > degree):
+            bad = values[np.argmax(counts > degree)]
+            raise CurveError(f"interior knot {bad:g} is repeated {int(counts.max())} times; at "
+                             f"most {degree} (the degree) keeps the curve connected")
+        if np.any(values == k[0]) or np.any(values == k[-1]):
+            raise CurveError(f"an end knot is repeated more than the order {order}")

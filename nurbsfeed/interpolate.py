@@ -1,0 +1,250 @@
+"""The real-time stage (SPEC §3): from the time law's per-period targets to curve parameters.
+
+All three methods consume the same targets ds_k = s(t_{k+1}) - s(t_k), t_k = k T:
+  taylor1  u+ = u + ds / |C'(u)|
+  rk4      classical RK4 on du/ds = 1/|C'(u)| over the step ds (4 derivative evaluations)
+  rk2c     the paper's method (Eq. 3-13): K1 = 1/|C'(u)|, K2 = 1/|C'(u + ds K1)|,
+           u~ = u + ds (K1 + K2)/2, then the correction du that makes the chord |C(u~ + du) - C(u)|
+           equal ds to first order: c1 du^2 + c2 du + c3 = 0 with c1 = |C'(u~)|^2,
+           c2 = 2 C'(u~).(C(u~) - C(u)), c3 = |C(u~) - C(u)|^2 - ds^2. The root near zero,
+           (-c2 + sqrt(disc)) / (2 c1), is computed as -2 c3 / (c2 + sqrt(disc)) (same root, no
+           cancellation); du = 0 when disc < 0 (the paper's rule).
+Where |C'(u)| vanishes (repeated control points, SPEC §3a) a step solves the chord equation
+|C(u + du) - C(u)| = ds directly instead of dividing by |C'|.
+
+End landing: rk2c makes every chord equal to its target, so its arc position runs ahead of the
+time law and the last step would overshoot the end. All targets are scaled by one factor
+sigma <= 1, found by a secant search on the signed distance between the last point and the curve
+end; sigma only lowers speed, acceleration and jerk. The last point is then the curve end exactly.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from nurbsfeed.geometry.kernel import eval_d1, find_span
+from nurbsfeed.jit import jit
+from nurbsfeed.planning.planner import Plan
+
+METHODS = {"taylor1": 0, "rk4": 1, "rk2c": 2}
+SLOW_SPEED_REL = 1e-3  # |C'| below this fraction of the mean |C'| is treated as "zero"
+LANDING_ABS_TOL_MM = 1e-12
+LANDING_MAX_RUNS = 8
+CHORD_ITERATIONS = 200
+
+
+@jit
+def _chord_step(knots, cw, degree, n_ctrl, u, px, py, pz, ds, guess, span,
+                basis, dbasis, left, right, p_tmp, d_tmp):
+    """The du > 0 with |C(u + du) - P| = ds, by bracketing and Illinois regula falsi."""
+    lo = 0.0
+    g_lo = -ds
+    hi = guess
+    g_hi = -ds
+    for _ in range(CHORD_ITERATIONS):
+        span = find_span(knots, degree, n_ctrl, u + hi, span)
+        eval_d1(knots, cw, degree, u + hi, span, basis, dbasis, left, right, p_tmp, d_tmp)
+        g_hi = math.sqrt((p_tmp[0] - px) ** 2 + (p_tmp[1] - py) ** 2
+                         + (p_tmp[2] - pz) ** 2) - ds
+        if g_hi >= 0.0:
+            break
+        lo = hi
+        g_lo = g_hi
+        hi *= 2.0
+    side = 0
+    for _ in range(CHORD_ITERATIONS):
+        if hi - lo <= 1e-16 * (abs(u) + hi):
+            break
+        x = (lo * g_hi - hi * g_lo) / (g_hi - g_lo)
+        span = find_span(knots, degree, n_ctrl, u + x, span)
+        eval_d1(knots, cw, degree, u + x, span, basis, dbasis, left, right, p_tmp, d_tmp)
+        g = math.sqrt((p_tmp[0] - px) ** 2 + (p_tmp[1] - py) ** 2 + (p_tmp[2] - pz) ** 2) - ds
+        if g == 0.0:
+            return x
+        if g < 0.0:
+            lo = x
+            g_lo = g
+            if side == -1:
+                g_hi *= 0.5
+            side = -1
+        else:
+            hi = x
+            g_hi = g
+            if side == 1:
+                g_lo *= 0.5
+            side = 1
+    return lo if -g_lo < g_hi else hi
+
+
+@jit
+def step_curve(method, knots, cw, degree, u0, ds, sigma, slow_speed, u_out, p_out):
+    """Step from u0 through the targets sigma * ds (N,): u_out (N+1,), p_out (N+1, 3) = C(u_k)."""
+    n_ctrl = cw.shape[0]
+    basis = np.empty(degree + 1)
+    dbasis = np.empty(degree + 1)
+    left = np.empty(degree + 1)
+    right = np.empty(degree + 1)
+    p = np.empty(3)
+    d = np.empty(3)
+    pt = np.empty(3)
+    dt = np.empty(3)
+    u_range = knots[knots.size - 1] - knots[0]
+    u = u0
+    span = find_span(knots, degree, n_ctrl, u, degree)
+    for k in range(ds.size + 1):
+        span = find_span(knots, degree, n_ctrl, u, span)
+        eval_d1(knots, cw, degree, u, span, basis, dbasis, left, right, p, d)
+        u_out[k] = u
+        p_out[k, 0] = p[0]
+        p_out[k, 1] = p[1]
+        p_out[k, 2] = p[2]
+        if k == ds.size:
+            break
+        h = sigma * ds[k]
+        speed = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        if h <= 0.0:
+            continue
+        slow = speed < slow_speed
+        if not slow:
+            k1 = 1.0 / speed
+            if method == 0:
+                u = u + h * k1
+                continue
+            if method == 1:
+                s2 = find_span(knots, degree, n_ctrl, u + 0.5 * h * k1, span)
+                eval_d1(knots, cw, degree, u + 0.5 * h * k1, s2, basis, dbasis, left, right, pt, dt)
+                sp2 = math.sqrt(dt[0] * dt[0] + dt[1] * dt[1] + dt[2] * dt[2])
+                s3 = find_span(knots, degree, n_ctrl, u + 0.5 * h / sp2, s2)
+                eval_d1(knots, cw, degree, u + 0.5 * h / sp2, s3, basis, dbasis, left, right, pt, dt)
+                sp3 = math.sqrt(dt[0] * dt[0] + dt[1] * dt[1] + dt[2] * dt[2])
+                s4 = find_span(knots, degree, n_ctrl, u + h / sp3, s3)
+                eval_d1(knots, cw, degree, u + h / sp3, s4, basis, dbasis, left, right, pt, dt)
+                sp4 = math.sqrt(dt[0] * dt[0] + dt[1] * dt[1] + dt[2] * dt[2])
+                slow = sp2 < slow_speed or sp3 < slow_speed or sp4 < slow_speed
+                if not slow:
+                    u = u + h * (k1 + 2.0 / sp2 + 2.0 / sp3 + 1.0 / sp4) / 6.0
+                    continue
+            else:
+                s2 = find_span(knots, degree, n_ctrl, u + h * k1, span)
+                eval_d1(knots, cw, degree, u + h * k1, s2, basis, dbasis, left, right, pt, dt)
+                sp2 = math.sqrt(dt[0] * dt[0] + dt[1] * dt[1] + dt[2] * dt[2])
+                slow = sp2 < slow_speed
+                if not slow:
+                    ut = u + 0.5 * h * (k1 + 1.0 / sp2)
+                    s3 = find_span(knots, degree, n_ctrl, ut, s2)
+                    eval_d1(knots, cw, degree, ut, s3, basis, dbasis, left, right, pt, dt)
+                    ex = pt[0] - p[0]
+                    ey = pt[1] - p[1]
+                    ez = pt[2] - p[2]
+                    c1 = dt[0] * dt[0] + dt[1] * dt[1] + dt[2] * dt[2]
+                    c2 = 2.0 * (dt[0] * ex + dt[1] * ey + dt[2] * ez)
+                    c3 = ex * ex + ey * ey + ez * ez - h * h
+                    disc = c2 * c2 - 4.0 * c1 * c3
+                    du = 0.0
+                    if disc >= 0.0:
+                        den = c2 + math.sqrt(disc)
+                        if den > 0.0:
+                            du = -2.0 * c3 / den
+                    u = ut + du
+                    continue
+        guess = h / slow_speed if speed < slow_speed else h / speed
+        guess = min(guess, u_range)
+        u = u + _chord_step(knots, cw, degree, n_ctrl, u, p[0], p[1], p[2], h, guess, span,
+                            basis, dbasis, left, right, pt, dt)
+
+
+@dataclass(frozen=True, eq=False)
+class Interpolation:
+    """One curve's interpolation points. (N+1,) arrays except points (N+1, 3) and ds (N,)."""
+
+    method: str
+    period_s: float
+    u: np.ndarray
+    points: np.ndarray  # C(u_k), full precision; first and last exactly the curve ends
+    t_s: np.ndarray
+    s_mm: np.ndarray  # sigma * s(t_k): the targets actually stepped
+    v_mm_s: np.ndarray
+    a_mm_s2: np.ndarray
+    j_mm_s3: np.ndarray
+    ds_mm: np.ndarray  # sigma * targets, (N,)
+    sigma: float
+    landing_runs: int
+    step_seconds: float  # wall time of the final kernel run
+
+    @property
+    def n_points(self) -> int:
+        return self.u.size
+
+    def feed_fluctuation(self) -> np.ndarray:
+        """SPEC §3 / Table 2: | |P_{k+1} - P_k| - ds_k | / ds_k for every full period: (N,)."""
+        chord = np.linalg.norm(np.diff(self.points, axis=0), axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ff = np.abs(chord - self.ds_mm) / self.ds_mm
+        return ff[self.ds_mm > 0]
+
+
+def _signed_end_distance(plan: Plan, u_last: float, p_last: np.ndarray) -> float:
+    gap = float(np.linalg.norm(p_last - plan.curve.points[-1]))
+    return gap if u_last >= plan.curve.u_max else -gap
+
+
+def interpolate(plan: Plan, method: str = "rk2c") -> Interpolation:
+    """Step along the planned curve with `method`; see the module docstring."""
+    curve = plan.curve
+    n = plan.n_periods
+    law = plan.law
+    period = plan.limits.period_s
+    if n == 0:
+        pts = curve.points[:1].copy()
+        z = np.zeros(1)
+        return Interpolation(method, period, np.array([curve.u_min]), pts, z, z, z, z, z,
+                             np.zeros(0), 1.0, 0, 0.0)
+    # plan time of period k: k * duration / n (exact at both ends, no accumulation)
+    t_plan = np.arange(n + 1, dtype=float) * (law.duration_s / n)
+    t_plan[-1] = law.duration_s
+    ds = law.increments(t_plan)
+    total = float(ds.sum())
+    u = np.empty(n + 1)
+    pts = np.empty((n + 1, 3))
+    mean_speed = plan.length_mm / (curve.u_max - curve.u_min)
+    slow = SLOW_SPEED_REL * mean_speed
+    code = METHODS[method]
+    knots, cw = curve.knots, curve.homogeneous
+
+    def run(sigma: float) -> float:
+        step_curve(code, knots, cw, curve.degree, curve.u_min, ds, sigma, slow, u, pts)
+        return _signed_end_distance(plan, u[-1], pts[-1])
+
+    sigma_prev, r_prev = 1.0, run(1.0)
+    sigma, runs = 1.0 - r_prev / total, 1
+    best = (abs(r_prev), sigma_prev)
+    elapsed = 0.0
+    while True:
+        start = time.perf_counter()
+        r = run(sigma)
+        elapsed = time.perf_counter() - start
+        runs += 1
+        if abs(r) < best[0]:
+            best = (abs(r), sigma)
+        if abs(r) <= LANDING_ABS_TOL_MM or runs >= LANDING_MAX_RUNS or r == r_prev:
+            break
+        sigma, sigma_prev, r_prev = sigma - r * (sigma - sigma_prev) / (r - r_prev), sigma, r
+    if sigma != best[1]:
+        sigma = best[1]
+        run(sigma)
+        runs += 1
+    sigma = min(sigma, 1.0)
+    u[0], u[-1] = curve.u_min, curve.u_max
+    pts[0], pts[-1] = curve.points[0], curve.points[-1]
+
+    scale = plan.time_scale
+    s, v, a, j = law.at(t_plan)
+    s_exec = sigma * np.concatenate([[0.0], np.cumsum(ds)])
+    t_exec = np.arange(n + 1, dtype=float) * period
+    return Interpolation(method, period, u, pts, t_exec, s_exec, sigma * v / scale,
+                         sigma * a / scale**2, sigma * np.broadcast_to(j, v.shape) / scale**3,
+                         sigma * ds, sigma, runs, elapsed)

@@ -1,0 +1,122 @@
+"""JSON curves (SPEC §4) read as a complete program: header, units, a rapid to each curve start.
+
+Semantic errors point at the key of the offending field in the file (the i-th occurrence of
+`"weights"` for curve i), since json does not report positions of values.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+
+from nurbsfeed.errors import CurveError, InputError, Location
+from nurbsfeed.geometry import NurbsCurve
+from nurbsfeed.program import CurveBlock, PassThrough, ProgramItem
+
+CURVE_KEYS = {"name", "degree", "knots", "control_points", "weights", "feed"}
+
+
+def _key_location(text: str, path: str, key: str, occurrence: int) -> Location:
+    """Line and column of the `occurrence`-th `"key"` in text (first one if there are fewer)."""
+    hits = [m.start() for m in re.finditer(re.escape(f'"{key}"'), text)]
+    if not hits:
+        return Location(path, 1, 1)
+    pos = hits[min(occurrence, len(hits) - 1)]
+    line = text.count("\n", 0, pos) + 1
+    col = pos - (text.rfind("\n", 0, pos) + 1) + 1
+    return Location(path, line, col)
+
+
+def _reject_constants(name: str) -> Any:
+    raise ValueError(f"{name} is not a number JSON allows")
+
+
+def read_json_curves(path: Path, text: str) -> tuple[str, list[tuple[NurbsCurve, float]]]:
+    """Parse and validate: (units, [(curve, feed_mm_s or inf)])."""
+    where = str(path)
+    try:
+        data = json.loads(text, parse_constant=_reject_constants)
+    except json.JSONDecodeError as exc:
+        raise InputError(f"not valid JSON: {exc.msg}",
+                         Location(where, exc.lineno, exc.colno)) from None
+    except ValueError as exc:
+        raise InputError(f"not valid JSON: {exc}", Location(where)) from None
+    if not isinstance(data, dict):
+        raise InputError("expected a JSON object with 'curves' (or a single curve object)",
+                         Location(where))
+    units = data.get("units", "mm")
+    if units not in ("mm", "in"):
+        raise InputError(f"'units' must be \"mm\" or \"in\", not {units!r}",
+                         _key_location(text, where, "units", 0))
+    raw_curves = data["curves"] if "curves" in data else [data]
+    if not isinstance(raw_curves, list) or not raw_curves:
+        raise InputError("'curves' must be a non-empty list of curve objects",
+                         _key_location(text, where, "curves", 0))
+    curves = []
+    for i, raw in enumerate(raw_curves):
+        if not isinstance(raw, dict):
+            raise InputError(f"curves[{i}] must be an object", _key_location(text, where,
+                                                                            "curves", 0))
+        unknown = sorted(set(raw) - CURVE_KEYS)
+        if unknown:
+            raise InputError(f"curves[{i}]: unknown key '{unknown[0]}' (known: "
+                             f"{', '.join(sorted(CURVE_KEYS))})",
+                             _key_location(text, where, unknown[0], 0))
+        for key in ("degree", "knots", "control_points"):
+            if key not in raw:
+                raise InputError(f"curves[{i}]: missing '{key}'",
+                                 _key_location(text, where, "degree" if key != "degree"
+                                               else "knots", i))
+        try:
+            curve = NurbsCurve.build(raw["degree"], raw["knots"], raw["control_points"],
+                                     raw.get("weights"), str(raw.get("name", f"curve{i}")))
+        except CurveError as exc:
+            field = _field_of(exc.message)
+            raise CurveError(f"curves[{i}]: {exc.message}",
+                             _key_location(text, where, field, i)) from None
+        feed = raw.get("feed")
+        if feed is None:
+            feed_mm_s = math.inf
+        elif (isinstance(feed, bool) or not isinstance(feed, (int, float))
+              or not math.isfinite(feed) or feed <= 0):
+            raise InputError(f"curves[{i}]: 'feed' must be a positive number (length/min), "
+                             f"not {feed!r}", _key_location(text, where, "feed", i))
+        else:
+            feed_mm_s = feed / 60.0
+        curves.append((curve, feed_mm_s))
+    return units, curves
+
+
+def _field_of(message: str) -> str:
+    for word, key in (("weight", "weights"), ("knot", "knots"), ("degree", "degree"),
+                      ("control point", "control_points")):
+        if word in message:
+            return key
+    return "control_points"
+
+
+def _fmt(value: float, decimals: int) -> str:
+    text = f"{value:.{decimals}f}".rstrip("0")
+    if text in ("-0.", "-"):
+        text = "0."
+    return text
+
+
+def json_program(path: Path, text: str, decimals: int = 4) -> Iterator[ProgramItem]:
+    """The JSON file as a program stream: header lines, then per curve a G0 and the curve."""
+    units, curves = read_json_curves(path, text)
+    yield PassThrough(f"(nurbsfeed: {len(curves)} curve(s) from {path.name})\n")
+    yield PassThrough(("G21" if units == "mm" else "G20") + " G90\n")
+    for i, (curve, feed_mm_s) in enumerate(curves):
+        start = curve.points[0]
+        yield PassThrough("G0 " + " ".join(f"{axis}{_fmt(v, decimals)}"
+                                           for axis, v in zip("XYZ", start)) + "\n")
+        yield CurveBlock(curve=curve, location=_key_location(text, str(path), "degree", i),
+                         units=units,
+                         feed_u=np.array([curve.u_min]), feed_mm_s=np.array([feed_mm_s]))
+    yield PassThrough("M2\n")

@@ -1,0 +1,125 @@
+"""Machine profile: the kinematic limits and output settings, loaded and validated from YAML.
+
+Units live in the key names. "mm" means the program's length unit: an inch program converts the
+profile once with `in_program_units` and from then on every length in nurbsfeed is in inches.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any, Mapping
+
+import yaml
+
+from nurbsfeed.errors import Location, ProfileError
+
+MM_PER_INCH = 25.4
+
+
+@dataclass(frozen=True)
+class Machine:
+    """Limits of one machine (SPEC §4). Every field is positive and finite."""
+
+    period_s: float
+    max_feed_mm_s: float
+    chord_error_mm: float
+    max_acc_mm_s2: float  # tangential
+    max_jerk_mm_s3: float  # tangential
+    max_normal_acc_mm_s2: float
+    max_normal_jerk_mm_s3: float
+    decimals: int = 4  # coordinate decimals in the output
+    feed_decimals: int = 3  # F word decimals (more when F is small; see gcode.writer)
+
+    def in_program_units(self, units: str) -> "Machine":
+        """This profile with every length converted to `units` ("mm" or "in")."""
+        if units == "mm":
+            return self
+        scale = 1.0 / MM_PER_INCH
+        return dataclasses.replace(
+            self,
+            max_feed_mm_s=self.max_feed_mm_s * scale,
+            chord_error_mm=self.chord_error_mm * scale,
+            max_acc_mm_s2=self.max_acc_mm_s2 * scale,
+            max_jerk_mm_s3=self.max_jerk_mm_s3 * scale,
+            max_normal_acc_mm_s2=self.max_normal_acc_mm_s2 * scale,
+            max_normal_jerk_mm_s3=self.max_normal_jerk_mm_s3 * scale,
+            decimals=self.decimals + 1,
+        )
+
+
+FLOAT_KEYS = tuple(f.name for f in dataclasses.fields(Machine) if f.type == "float")
+INT_KEYS = ("decimals", "feed_decimals")
+INT_RANGES = {"decimals": (0, 8), "feed_decimals": (0, 6)}
+
+
+def _check_value(key: str, value: Any, where: str) -> float | int:
+    if key in INT_KEYS:
+        low, high = INT_RANGES[key]
+        if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+            raise ProfileError(f"{where}: '{key}' must be a whole number from {low} to {high}, "
+                               f"not {value!r}")
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ProfileError(f"{where}: '{key}' must be a number, not {value!r}")
+    if not math.isfinite(value) or value <= 0:
+        raise ProfileError(f"{where}: '{key}' must be positive and finite, not {value!r}")
+    return float(value)
+
+
+def machine_from_mapping(data: Any, where: str,
+                         overrides: Mapping[str, Any] | None = None) -> Machine:
+    """Validate a parsed profile (`where` names it in messages) and apply CLI overrides."""
+    if not isinstance(data, dict):
+        raise ProfileError(f"{where}: a machine profile is a mapping of keys to values, "
+                           f"not {type(data).__name__}")
+    known = set(FLOAT_KEYS) | set(INT_KEYS)
+    for key in data:
+        if key not in known:
+            raise ProfileError(f"{where}: unknown key '{key}' (known keys: "
+                               f"{', '.join(sorted(known))})")
+    values: dict[str, float | int] = {}
+    for key in FLOAT_KEYS:
+        if key not in data:
+            raise ProfileError(f"{where}: missing key '{key}'")
+        values[key] = _check_value(key, data[key], where)
+    for key in INT_KEYS:
+        if key in data:
+            values[key] = _check_value(key, data[key], where)
+    for key, value in (overrides or {}).items():
+        if value is not None:
+            values[key] = _check_value(key, value, f"option --{key.replace('_', '-')}")
+    return Machine(**values)  # type: ignore[arg-type]
+
+
+def builtin_profiles() -> list[str]:
+    """Names accepted by `--machine NAME`."""
+    folder = resources.files("nurbsfeed.configs")
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".yaml"))
+
+
+def load_machine(name_or_path: str, overrides: Mapping[str, Any] | None = None) -> Machine:
+    """A profile by built-in name (`default`, `paper-table1`) or by path to a YAML file."""
+    path = Path(name_or_path)
+    if path.suffix in (".yaml", ".yml") or path.exists():
+        where = str(path)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except OSError as exc:
+            raise ProfileError(f"{where}: cannot read machine profile ({exc.strerror})") from None
+    else:
+        if name_or_path not in builtin_profiles():
+            raise ProfileError(f"unknown machine '{name_or_path}': give a YAML file or one of "
+                               f"{', '.join(builtin_profiles())}")
+        where = f"{name_or_path}.yaml"
+        text = (resources.files("nurbsfeed.configs") / where).read_text(encoding="utf-8")
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        loc = Location(where, mark.line + 1, mark.column + 1) if mark else Location(where)
+        raise ProfileError(f"not valid YAML ({getattr(exc, 'problem', exc)})", loc) from None
+    return machine_from_mapping(data, where, overrides)

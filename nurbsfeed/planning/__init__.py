@@ -1,0 +1,1 @@
+"""Feedrate planning (SPEC §2): key points, S-curves, bidirectional scan, time law."""

@@ -1,0 +1,60 @@
+"""The pointwise speed limit of a curve point (paper Eq. 15, corrected) and the curvature threshold
+(Eq. 16).
+
+Names: kappa_1_mm curvature, v_mm_s speed; "mm" is the program's length unit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from nurbsfeed.machine import Machine
+
+
+@dataclass(frozen=True)
+class Limits:
+    """The limits one curve is planned under, in program units and seconds."""
+
+    period_s: float
+    feed_mm_s: float  # v_m: min(machine max feed, programmed feed)
+    chord_mm: float  # delta
+    acc_mm_s2: float  # A_t
+    jerk_mm_s3: float  # J_t
+    normal_acc_mm_s2: float  # A_n
+    normal_jerk_mm_s3: float  # J_n
+
+    @classmethod
+    def from_machine(cls, machine: Machine, feed_mm_s: float = np.inf) -> "Limits":
+        return cls(machine.period_s, min(machine.max_feed_mm_s, feed_mm_s),
+                   machine.chord_error_mm, machine.max_acc_mm_s2, machine.max_jerk_mm_s3,
+                   machine.max_normal_acc_mm_s2, machine.max_normal_jerk_mm_s3)
+
+
+def curvature_threshold(lim: Limits) -> float:
+    """kappa_0 (Eq. 16): above it the pointwise limit of Eq. 15 is below v_m.
+
+    min(8 delta / (v_m^2 T^2 + 4 delta^2), A_n / v_m^2, sqrt(J_n / v_m^3)).
+    """
+    v, t, d = lim.feed_mm_s, lim.period_s, lim.chord_mm
+    return float(min(8.0 * d / (v * v * t * t + 4.0 * d * d), lim.normal_acc_mm_s2 / v**2,
+                     np.sqrt(lim.normal_jerk_mm_s3 / v**3)))
+
+
+def speed_limit(kappa_1_mm: np.ndarray, lim: Limits, feed_mm_s: np.ndarray | float) -> np.ndarray:
+    """Pointwise limit v(kappa) (Eq. 15 with the sign of Eq. 14 corrected): (N,) -> (N,).
+
+    min(v_m, (2/T) sqrt(2 rho delta - delta^2), sqrt(A_n rho), cbrt(J_n rho^2)) with rho = 1/kappa.
+    The chord term saturates at 2 rho / T once delta >= rho (the chord is then a diameter).
+    Written in kappa so that kappa = 0 gives the feed cap without dividing by zero.
+    """
+    k = np.asarray(kappa_1_mm, dtype=float)
+    t, d = lim.period_s, lim.chord_mm
+    with np.errstate(divide="ignore", invalid="ignore"):
+        chord = np.where(k * d < 1.0, (2.0 / t) * np.sqrt(d * (2.0 - k * d) / k), 2.0 / (k * t))
+        acc = np.sqrt(lim.normal_acc_mm_s2 / k)
+        jerk = np.cbrt(lim.normal_jerk_mm_s3 / (k * k))
+    v = np.minimum(np.minimum(chord, acc), jerk)
+    v = np.where(k > 0.0, v, np.inf)
+    return np.minimum(v, np.minimum(lim.feed_mm_s, feed_mm_s))
