@@ -10,12 +10,16 @@ All three methods consume the same targets ds_k = s(t_{k+1}) - s(t_k), t_k = k T
            (-c2 + sqrt(disc)) / (2 c1), is computed as -2 c3 / (c2 + sqrt(disc)) (same root, no
            cancellation); du = 0 when disc < 0 (the paper's rule).
 Where |C'(u)| vanishes (repeated control points, SPEC §3a) a step solves the chord equation
-|C(u + du) - C(u)| = ds directly instead of dividing by |C'|.
+|C(u + du) - C(u)| = ds directly instead of dividing by |C'|; rk2c and rk4 also do so when |C'|
+changes by more than a quarter within the step, which only happens right next to such a point.
 
 End landing: rk2c makes every chord equal to its target, so its arc position runs ahead of the
 time law and the last step would overshoot the end. All targets are scaled by one factor
-sigma <= 1, found by a secant search on the signed distance between the last point and the curve
-end; sigma only lowers speed, acceleration and jerk. The last point is then the curve end exactly.
+sigma <= 1, found by a secant search so that the last chord, from the last stepped point to the
+curve end, equals its own target; sigma only lowers speed, acceleration and jerk. The last point
+is the curve end exactly.
+Where the plan rests inside the curve (a corner), each stretch between rests is stepped and
+landed on its own, so a point falls exactly on the corner.
 """
 
 from __future__ import annotations
@@ -32,7 +36,11 @@ from nurbsfeed.planning.planner import Plan
 
 METHODS = {"taylor1": 0, "rk4": 1, "rk2c": 2}
 SLOW_SPEED_REL = 1e-3  # |C'| below this fraction of the mean |C'| is treated as "zero"
-LANDING_ABS_TOL_MM = 1e-12
+# rk2c / rk4: when |C'| changes by more than this fraction across one step, the step is next to
+# a point where C' = 0 and the Taylor-based update is not valid there: solve the chord instead.
+STEP_SPEED_CHANGE_MAX = 0.25
+LANDING_REL_TOL = 1e-9  # of the last target: the last chord matches it to 1e-7 %
+LANDING_ULPS = 16
 LANDING_MAX_RUNS = 8
 CHORD_ITERATIONS = 200
 
@@ -57,7 +65,7 @@ def _chord_step(knots, cw, degree, n_ctrl, u, px, py, pz, ds, guess, span,
         hi *= 2.0
     side = 0
     for _ in range(CHORD_ITERATIONS):
-        if hi - lo <= 1e-16 * (abs(u) + hi):
+        if hi - lo <= 1e-16 * (abs(u) + hi) or g_hi == g_lo:
             break
         x = (lo * g_hi - hi * g_lo) / (g_hi - g_lo)
         span = find_span(knots, degree, n_ctrl, u + x, span)
@@ -81,9 +89,13 @@ def _chord_step(knots, cw, degree, n_ctrl, u, px, py, pz, ds, guess, span,
 
 
 @jit
-def step_curve(method, knots, cw, degree, u0, ds, sigma, slow_speed, u_out, p_out):
-    """Step from u0 through the targets sigma * ds (N,): u_out (N+1,), p_out (N+1, 3) = C(u_k)."""
-    n_ctrl = cw.shape[0]
+def step_curve(method, knots, cw, degree, n_spans, u0, ds, sigma, slow_speed, u_out, p_out):
+    """Step from u0 through the targets sigma * ds (N,): u_out (N+1,), p_out (N+1, 3) = C(u_k).
+
+    Spans past index n_spans - 1 are not used: beyond the end of the stretch the last span's
+    polynomial extrapolates, so the landing search sees a smooth continuation even at a corner.
+    """
+    n_ctrl = n_spans
     basis = np.empty(degree + 1)
     dbasis = np.empty(degree + 1)
     left = np.empty(degree + 1)
@@ -124,7 +136,8 @@ def step_curve(method, knots, cw, degree, u0, ds, sigma, slow_speed, u_out, p_ou
                 s4 = find_span(knots, degree, n_ctrl, u + h / sp3, s3)
                 eval_d1(knots, cw, degree, u + h / sp3, s4, basis, dbasis, left, right, pt, dt)
                 sp4 = math.sqrt(dt[0] * dt[0] + dt[1] * dt[1] + dt[2] * dt[2])
-                slow = sp2 < slow_speed or sp3 < slow_speed or sp4 < slow_speed
+                slow = (sp2 < slow_speed or sp3 < slow_speed or sp4 < slow_speed
+                        or abs(1.0 - speed / sp4) > STEP_SPEED_CHANGE_MAX)
                 if not slow:
                     u = u + h * (k1 + 2.0 / sp2 + 2.0 / sp3 + 1.0 / sp4) / 6.0
                     continue
@@ -132,7 +145,7 @@ def step_curve(method, knots, cw, degree, u0, ds, sigma, slow_speed, u_out, p_ou
                 s2 = find_span(knots, degree, n_ctrl, u + h * k1, span)
                 eval_d1(knots, cw, degree, u + h * k1, s2, basis, dbasis, left, right, pt, dt)
                 sp2 = math.sqrt(dt[0] * dt[0] + dt[1] * dt[1] + dt[2] * dt[2])
-                slow = sp2 < slow_speed
+                slow = sp2 < slow_speed or abs(1.0 - speed / sp2) > STEP_SPEED_CHANGE_MAX
                 if not slow:
                     ut = u + 0.5 * h * (k1 + 1.0 / sp2)
                     s3 = find_span(knots, degree, n_ctrl, ut, s2)
@@ -171,9 +184,9 @@ class Interpolation:
     a_mm_s2: np.ndarray
     j_mm_s3: np.ndarray
     ds_mm: np.ndarray  # sigma * targets, (N,)
-    sigma: float
-    landing_runs: int
-    step_seconds: float  # wall time of the final kernel run
+    sigma: np.ndarray  # (P,) target scale of each stretch between rests
+    landing_runs: int  # kernel runs over all stretches
+    step_seconds: float  # wall time of the final kernel run of every stretch
 
     @property
     def n_points(self) -> int:
@@ -187,64 +200,115 @@ class Interpolation:
         return ff[self.ds_mm > 0]
 
 
-def _signed_end_distance(plan: Plan, u_last: float, p_last: np.ndarray) -> float:
-    gap = float(np.linalg.norm(p_last - plan.curve.points[-1]))
-    return gap if u_last >= plan.curve.u_max else -gap
+@dataclass(frozen=True)
+class _Stretch:
+    """The result of stepping one stretch between two rests."""
+
+    u: np.ndarray
+    points: np.ndarray
+    ds_mm: np.ndarray
+    sigma: float
+    runs: int
+    seconds: float
 
 
-def interpolate(plan: Plan, method: str = "rk2c") -> Interpolation:
-    """Step along the planned curve with `method`; see the module docstring."""
-    curve = plan.curve
-    n = plan.n_periods
-    law = plan.law
-    period = plan.limits.period_s
-    if n == 0:
-        pts = curve.points[:1].copy()
-        z = np.zeros(1)
-        return Interpolation(method, period, np.array([curve.u_min]), pts, z, z, z, z, z,
-                             np.zeros(0), 1.0, 0, 0.0)
-    # plan time of period k: k * duration / n (exact at both ends, no accumulation)
-    t_plan = np.arange(n + 1, dtype=float) * (law.duration_s / n)
-    t_plan[-1] = law.duration_s
-    ds = law.increments(t_plan)
-    total = float(ds.sum())
+def _step_stretch(curve, code: int, u_start: float, u_end: float, end_point: np.ndarray,
+                  ds: np.ndarray, slow: float) -> _Stretch:
+    """Step from u_start through ds (N,) and land exactly on end_point.
+
+    The kernel makes the first N-1 steps with targets sigma * ds; the last point is end_point
+    itself, and sigma is found by a secant search so that the last chord, |end - P_{N-1}|,
+    equals its target sigma * ds[-1]. That residual is continuous and monotone in sigma even
+    where C' vanishes at the end (the curve folds back there when extrapolated).
+    """
+    n = ds.size
     u = np.empty(n + 1)
     pts = np.empty((n + 1, 3))
-    mean_speed = plan.length_mm / (curve.u_max - curve.u_min)
-    slow = SLOW_SPEED_REL * mean_speed
-    code = METHODS[method]
+    total = float(ds.sum())
     knots, cw = curve.knots, curve.homogeneous
+    head = ds[:-1]
+    n_spans = int(np.searchsorted(knots, u_end, side="left"))  # last span ends at u_end
+    # sigma resolves the landing only to about eps * (length + coordinates): ask no more
+    noise = LANDING_ULPS * np.finfo(float).eps * (total + float(np.max(np.abs(end_point))))
+    tol = max(LANDING_REL_TOL * float(ds[-1]), noise)
 
     def run(sigma: float) -> float:
-        step_curve(code, knots, cw, curve.degree, curve.u_min, ds, sigma, slow, u, pts)
-        return _signed_end_distance(plan, u[-1], pts[-1])
+        step_curve(code, knots, cw, curve.degree, n_spans, u_start, head, sigma, slow,
+                   u[:-1], pts[:-1])
+        gap = float(np.linalg.norm(end_point - pts[-2]))
+        return (gap if u[-2] <= u_end else -gap) - sigma * float(ds[-1])
 
     sigma_prev, r_prev = 1.0, run(1.0)
-    sigma, runs = 1.0 - r_prev / total, 1
-    best = (abs(r_prev), sigma_prev)
-    elapsed = 0.0
-    while True:
+    best = (abs(r_prev), 1.0)
+    sigma, runs, seconds = 1.0 + r_prev / total, 1, 0.0
+    while abs(r_prev) > tol:
         start = time.perf_counter()
         r = run(sigma)
-        elapsed = time.perf_counter() - start
+        seconds = time.perf_counter() - start
         runs += 1
         if abs(r) < best[0]:
             best = (abs(r), sigma)
-        if abs(r) <= LANDING_ABS_TOL_MM or runs >= LANDING_MAX_RUNS or r == r_prev:
+        if abs(r) <= tol or runs >= LANDING_MAX_RUNS or r == r_prev:
             break
         sigma, sigma_prev, r_prev = sigma - r * (sigma - sigma_prev) / (r - r_prev), sigma, r
     if sigma != best[1]:
         sigma = best[1]
         run(sigma)
         runs += 1
-    sigma = min(sigma, 1.0)
-    u[0], u[-1] = curve.u_min, curve.u_max
-    pts[0], pts[-1] = curve.points[0], curve.points[-1]
+    u[-1] = u_end
+    pts[-1] = end_point
+    return _Stretch(u, pts, sigma * ds, sigma, runs, seconds)
 
-    scale = plan.time_scale
-    s, v, a, j = law.at(t_plan)
-    s_exec = sigma * np.concatenate([[0.0], np.cumsum(ds)])
-    t_exec = np.arange(n + 1, dtype=float) * period
-    return Interpolation(method, period, u, pts, t_exec, s_exec, sigma * v / scale,
-                         sigma * a / scale**2, sigma * np.broadcast_to(j, v.shape) / scale**3,
-                         sigma * ds, sigma, runs, elapsed)
+
+def interpolate(plan: Plan, method: str = "rk2c") -> Interpolation:
+    """Step along the planned curve with `method`; see the module docstring."""
+    curve = plan.curve
+    law = plan.law
+    period = plan.limits.period_s
+    code = METHODS[method]
+    mean_speed = plan.length_mm / (curve.u_max - curve.u_min)
+    slow = SLOW_SPEED_REL * mean_speed
+    key_u = plan.key_u
+    us, pts, dss, ts, vs, accs, jerks, sigmas = ([curve.u_min], [curve.points[:1]], [], [0.0],
+                                                 [], [], [], [])
+    runs, seconds = 0, 0.0
+    for p in range(len(plan.piece_periods)):
+        n = int(plan.piece_periods[p])
+        k0, k1 = plan.piece_key[p], plan.piece_key[p + 1]
+        if n == 0:
+            continue
+        t_a, t_b = law.key_t_s[k0], law.key_t_s[k1]
+        # plan time of period k of this stretch: t_a + k (t_b - t_a) / n, exact at both ends
+        t_plan = t_a + np.arange(n + 1, dtype=float) * ((t_b - t_a) / n)
+        t_plan[-1] = t_b
+        ds = law.increments(t_plan)
+        last = p == len(plan.piece_periods) - 1
+        end_point = curve.points[-1] if last else curve.point(key_u[k1])
+        stretch = _step_stretch(curve, code, float(key_u[k0]), float(key_u[k1]),
+                                np.asarray(end_point, dtype=float), ds, slow)
+        runs += stretch.runs
+        seconds += stretch.seconds
+        scale = float(plan.piece_scale[p])
+        _, v, a, j = law.at(t_plan[1:])
+        us.append(stretch.u[1:])
+        pts.append(stretch.points[1:])
+        dss.append(stretch.ds_mm)
+        vs.append(stretch.sigma * v / scale)
+        accs.append(stretch.sigma * a / scale**2)
+        jerks.append(stretch.sigma * np.broadcast_to(j, v.shape) / scale**3)
+        sigmas.append(stretch.sigma)
+    ds_all = np.concatenate(dss) if dss else np.zeros(0)
+    u_all = np.concatenate([np.asarray(x, dtype=float).ravel() for x in us])
+    points = np.concatenate(pts)
+    points[0] = curve.points[0]
+    n_all = u_all.size
+    s_all = np.concatenate([[0.0], np.cumsum(ds_all)])
+    # at rest at the start (and at every stretch start): v = a = 0, the jerk of the first piece
+    first_j = float(law.jerk_mm_s3[0]) if law.jerk_mm_s3.size else 0.0
+    first_scale = float(plan.piece_scale[0]) if plan.piece_scale.size else 1.0
+    first_sigma = sigmas[0] if sigmas else 1.0
+    v_all = np.concatenate([[0.0]] + vs)
+    a_all = np.concatenate([[0.0]] + accs)
+    j_all = np.concatenate([[first_sigma * first_j / first_scale**3]] + jerks)
+    return Interpolation(method, period, u_all, points, np.arange(n_all, dtype=float) * period,
+                         s_all, v_all, a_all, j_all, ds_all, np.array(sigmas), runs, seconds)

@@ -76,7 +76,7 @@ class NurbsCurve:
             bad_w = np.flatnonzero(~(np.isfinite(w) & (w > 0)))
             if bad_w.size:
                 raise CurveError(f"weight {bad_w[0]} must be positive and finite, "
-                                 f"not {w[bad_w[0]]!r}")
+                                 f"not {float(w[bad_w[0]])!r}")
         try:
             k = np.array(knots, dtype=float)
         except (TypeError, ValueError):

@@ -16,7 +16,9 @@ everywhere, whole periods (SPEC §2).
    segment's cap; then the scan runs again. What is left after MAX_FIX_ROUNDS is removed by
    slowing the whole law uniformly (time scale lambda >= 1 keeps every limit).
 6. Whole periods: the time law is stretched by lambda >= 1 so that its duration is a whole
-   number of periods (v/lambda, a/lambda^2, j/lambda^3: limits still hold).
+   number of periods (v/lambda, a/lambda^2, j/lambda^3: limits still hold). Where the motion
+   rests inside the curve (a corner), each stretch between rests gets its own lambda, so that an
+   interpolation point falls exactly on the corner.
 
 Speeds at grid nodes are checked against an eroded limit (the minimum over each node and its two
 neighbours), which covers interpolation points that fall between nodes.
@@ -24,7 +26,6 @@ neighbours), which covers interpolation points that fall between nodes.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -51,7 +52,7 @@ class Plan:
 
     Key points (K,): grid node index, kind, nominal speed (Eq. 15 / 0 at ends and corners) and
     planned speed after the scan. Segments (K-1,): peak speed, holds. `law` is in plan time;
-    the executed law is law(t / time_scale), lasting n_periods * period_s.
+    stretch p between rests runs law(t / piece_scale[p]) in piece_periods[p] whole periods.
     """
 
     curve: NurbsCurve
@@ -67,10 +68,22 @@ class Plan:
     seg_hold_start_mm: np.ndarray
     seg_hold_end_mm: np.ndarray
     law: TimeLaw
-    time_scale: float  # lambda >= 1 (whole periods and any residual fix)
     residual_scale: float  # part of lambda that fixed what the key points could not (1 = none)
-    n_periods: int
+    piece_key: np.ndarray  # (P+1,) keys where the motion is at rest: ends, corners, cusps
+    piece_periods: np.ndarray  # (P,) whole periods of each stretch between rests
+    piece_scale: np.ndarray  # (P,) lambda >= 1 of each stretch
     fix_rounds: int
+
+    @property
+    def n_periods(self) -> int:
+        return int(self.piece_periods.sum())
+
+    @property
+    def time_scale(self) -> float:
+        """Overall lambda: executed duration / planned duration (1 for a zero-length curve)."""
+        if self.law.duration_s == 0.0:
+            return 1.0
+        return self.cycle_time_s / self.law.duration_s
 
     @property
     def length_mm(self) -> float:
@@ -97,10 +110,16 @@ def feed_at(u: np.ndarray, feed_u: np.ndarray, feed_mm_s: np.ndarray) -> np.ndar
     return np.where(i >= 0, feed_mm_s[np.clip(i, 0, None)], np.inf)
 
 
-def _eroded(v: np.ndarray) -> np.ndarray:
-    out = v.copy()
-    out[1:] = np.minimum(out[1:], v[:-1])
-    out[:-1] = np.minimum(out[:-1], v[1:])
+def _eroded(v: np.ndarray, stops: np.ndarray) -> np.ndarray:
+    """min(v[i-1], v[i], v[i+1]) per node, except that a stop node (corner or cusp, limit 0)
+    does not spread to its neighbours: beside a corner the curvature is finite."""
+    w = v.copy()
+    for n in stops:  # borrow the neighbours' limits for the stop node while eroding
+        w[n] = min(v[max(n - 1, 0)], v[min(n + 1, v.size - 1)])
+    out = w.copy()
+    out[1:] = np.minimum(out[1:], w[:-1])
+    out[:-1] = np.minimum(out[:-1], w[1:])
+    out[stops] = 0.0
     return out
 
 
@@ -130,16 +149,18 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
     feed_breaks = feed_u[1:] if feed_u.size else feed_u
     grid = build_grid(curve, spacing, feed_breaks)
     fcap = feed_at(grid.u, feed_u, feed_mm_s)
-    limit = _eroded(speed_limit(grid.kappa_1_mm, lim, fcap))
+    # corners (tangent jumps) and cusps (kappa infinite inside the curve) are passed at rest
+    last = grid.u.size - 1
+    stops = np.union1d(grid.corner_index, np.flatnonzero(np.isinf(grid.kappa_1_mm)))
+    stops = stops[(stops > 0) & (stops < last)]
+    limit = _eroded(speed_limit(grid.kappa_1_mm, lim, fcap), stops)
     kappa0 = curvature_threshold(lim)
 
     # ---- key points -----------------------------------------------------------------------
-    last = grid.u.size - 1
     peaks = grid.peak_index[grid.kappa_1_mm[grid.peak_index] >= kappa0]
     feed_nodes = np.searchsorted(grid.u, feed_breaks)
     nodes = {0: KIND_END, last: KIND_END}
-    for kind, idx in ((KIND_FEED, feed_nodes), (KIND_PEAK, peaks), (KIND_CORNER,
-                                                                    grid.corner_index)):
+    for kind, idx in ((KIND_FEED, feed_nodes), (KIND_PEAK, peaks), (KIND_CORNER, stops)):
         for n in idx:
             if 0 < n < last:
                 nodes[int(n)] = kind
@@ -168,6 +189,7 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
         law = TimeLaw.from_segments(key_s, v, peak, hold_start, hold_end, a, j)
         v_nodes = law.speed_at_arc(grid.s_mm)
         bad = v_nodes > limit * (1.0 + SPEED_CHECK_REL_TOL)
+        bad[key_node] = False  # passed at the key speed <= nominal by construction
         if not np.any(bad) or rounds == MAX_FIX_ROUNDS:
             break
         rounds += 1
@@ -187,8 +209,10 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
                 new_end = max(new_end, key_s[seg + 1] - s_bad[down].max())
             if np.any(mid) or (np.any(up) and v[seg] == 0.0) or (np.any(down)
                                                                   and v[seg + 1] == 0.0):
-                cap[seg] = min(cap[seg], float(limit[nodes_bad].min()))
-                changed = True
+                lowest = float(limit[nodes_bad].min())
+                if 0.0 < lowest < cap[seg]:
+                    cap[seg] = lowest
+                    changed = True
             need = transition_distance_mm(v[seg], v[seg + 1], a, j)
             if new_start + new_end + need <= length[seg]:
                 changed |= (new_start, new_end) != (hold_start[seg], hold_end[seg])
@@ -198,17 +222,24 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
 
     # Whatever the key points could not fix is fixed by slowing the whole law uniformly.
     with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(limit > 0, v_nodes / limit, np.where(v_nodes > 0, np.inf, 0.0))
+        ratio = np.where(limit > 0, v_nodes / limit, 0.0)
+    ratio[key_node] = 0.0
     residual = max(1.0, float(np.max(ratio)))
-    if not math.isfinite(residual):
-        residual = 1.0  # only at a node whose limit is exactly 0, which the law passes at rest
-    duration = law.duration_s * residual
-    if duration > 0.0:
-        n_periods = max(1, math.ceil(duration / lim.period_s * (1.0 - PERIOD_ROUNDING_REL)))
-        scale = n_periods * lim.period_s / law.duration_s
-    else:
-        n_periods, scale = 0, 1.0
-    for arr in (key_node, key_kind, nominal, v, peak, hold_start, hold_end):
+    # The motion stops at every interior key of speed 0 (corners, cusps): each stretch between
+    # stops is stretched to a whole number of periods on its own and stepped on its own, so that
+    # an interpolation point lands exactly on every corner.
+    piece_key = np.array([0] + [k for k in range(1, len(v) - 1) if v[k] == 0.0] + [len(v) - 1])
+    piece_duration = np.diff(law.key_t_s[piece_key])
+    exact = piece_duration * residual / lim.period_s
+    piece_periods = np.where(piece_duration > 0.0,
+                             np.maximum(1, np.ceil(exact * (1.0 - PERIOD_ROUNDING_REL))),
+                             0).astype(np.int64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        piece_scale = np.where(piece_duration > 0.0,
+                               piece_periods * lim.period_s / piece_duration, 1.0)
+    for arr in (key_node, key_kind, nominal, v, peak, hold_start, hold_end, piece_key,
+                piece_periods, piece_scale):
         arr.setflags(write=False)
     return Plan(curve, lim, grid, kappa0, int(peaks.size), key_node, key_kind, nominal, v, peak,
-                hold_start, hold_end, law, scale, residual, n_periods, rounds)
+                hold_start, hold_end, law, residual, piece_key, piece_periods, piece_scale,
+                rounds)

@@ -1,4 +1,4 @@
-"""Jerk-limited speed transitions (paper Eq. 17-20, errata in SPEC §2) and segment peak speeds.
+r"""Jerk-limited speed transitions (paper Eq. 17-20, errata in SPEC §2) and segment peak speeds.
 
 A transition changes speed by dv with zero acceleration at both ends:
 

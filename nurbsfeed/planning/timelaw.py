@@ -25,6 +25,7 @@ class TimeLaw:
     v0_mm_s: np.ndarray
     a0_mm_s2: np.ndarray
     jerk_mm_s3: np.ndarray
+    key_t_s: np.ndarray  # (K,) time at which the law passes each key point
     duration_s: float
     length_mm: float
 
@@ -38,8 +39,10 @@ class TimeLaw:
         takes up whatever distance the transitions leave, and the state is reset at every key.
         """
         t0, s0, v0, a0, jk = [], [], [], [], []
+        key_t = np.zeros(len(s_key_mm))
         t = 0.0
         for i in range(len(s_key_mm) - 1):
+            key_t[i] = t
             va, vb, vp = float(v_key_mm_s[i]), float(v_key_mm_s[i + 1]), float(v_peak_mm_s[i])
             length = float(s_key_mm[i + 1] - s_key_mm[i])
             if length <= 0.0:
@@ -67,10 +70,16 @@ class TimeLaw:
                 v += a * dur + j * dur**2 / 2.0
                 a += j * dur
                 t += dur
-        arrays = [np.array(x, dtype=float) for x in (t0, s0, v0, a0, jk)]
+        key_t[-1] = t
+        arrays = [np.array(x, dtype=float) for x in (t0, s0, v0, a0, jk)] + [key_t]
         for arr in arrays:
             arr.setflags(write=False)
         return cls(*arrays, duration_s=t, length_mm=float(s_key_mm[-1]))
+
+    @property
+    def is_empty(self) -> bool:
+        """A law of zero length (a curve whose control points are all equal)."""
+        return self.t0_s.size == 0
 
     def _piece(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         i = np.clip(np.searchsorted(self.t0_s, t_s, side="right") - 1, 0, len(self.t0_s) - 1)
@@ -78,6 +87,9 @@ class TimeLaw:
 
     def at(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """s, v, a, j at absolute times (N,) -> four (N,) arrays."""
+        if self.is_empty:
+            zero = np.zeros(np.shape(t_s))
+            return zero, zero, zero, zero
         i, tau = self._piece(np.asarray(t_s, dtype=float))
         v0, a0, j = self.v0_mm_s[i], self.a0_mm_s2[i], self.jerk_mm_s3[i]
         s = self.s0_mm[i] + tau * (v0 + tau * (a0 / 2.0 + tau * j / 6.0))
@@ -95,6 +107,8 @@ class TimeLaw:
     def speed_at_arc(self, s_mm: np.ndarray) -> np.ndarray:
         """v where the law passes arc length s: (M,) -> (M,), by bisection in each piece."""
         s_mm = np.asarray(s_mm, dtype=float)
+        if self.is_empty:
+            return np.zeros_like(s_mm)
         i = np.clip(np.searchsorted(self.s0_mm, s_mm, side="right") - 1, 0, len(self.s0_mm) - 1)
         end = np.append(self.t0_s[1:], self.duration_s)
         low = np.zeros_like(s_mm)

@@ -1,0 +1,259 @@
+"""Fanuc G06.2 NURBS interpolation (also Mitsubishi), and LinuxCNC's G6.2 variant of it.
+
+    G06.2 [P_] K_ X_ Y_ Z_ [R_] [F_]     first control point; P = order ("rank") 2..4, default 4
+    K_ X_ Y_ Z_ [R_] [F_]                one block per further control point
+    K_                                   then exactly `order` knot-only blocks close the curve
+
+References: FANUC Series 15i/150i-MA Operator's Manual (B-63324EN/03) §4.17 "NURBS
+interpolation" and its alarm list PS1002-PS1009; Mitsubishi M700V/M70V Programming Manual §6.15
+"NURBS Interpolation" (program errors P29, P32, P33, P551). Each rule below is checked where its
+block arrives; the message names the alarm a controller would raise.
+
+- K on every control-point block (PS1002; Mitsubishi P33). Knots never decrease (P551). The first
+  `order` knots are equal and so are the last `order` (clamped ends, PS1007); no value repeats more
+  than `order` times in a row (PS1008), and an interior value at most `order - 1` times (nurbsfeed
+  needs a connected curve; `order` equal interior knots would split it in two).
+- The knot count is control points + order by construction: the curve ends after exactly `order`
+  knot-only blocks; fewer before another command is PS1004 (PS1005 if the command comes before any
+  knot-only block), one more is reported by the reader. Fewer control points than the order is an
+  error at the first knot-only block.
+- R is the weight, default 1, never modal; it must be positive. Omitted axes hold the previous
+  control point's value; on the first block they hold the current position.
+- The first control point must be the current position (PS1009; Mitsubishi: "command so that it
+  matches the end point of the previous block"), to half a unit in the last decimal of the
+  coarser of the two written values (modal.tolerance). Where the current position is unknown
+  (modal.py lists what loses it), a programmed axis is taken as the start and not checked; an
+  omitted axis is an error, since its value is needed.
+- G91: each control point is relative to the previous one, the first relative to the current
+  position, so it must be zero travel ("G06.2 X0 Y0 Z0 K_", 15i manual). Knots and weights are
+  always absolute.
+- Not under G41/G42 or G93/G95 (PS1006). Other commands (M, S, T, G codes other than G06.2)
+  cannot be specified inside the curve ("commands other than NURBS interpolation cannot be
+  specified"), and parameter assignments are refused because the block is replaced.
+- An F word on control point j holds from the span starting at knot j on (SPEC §3a).
+- G06.2 is modal (group 01): after the knot-only blocks, a block with K and axis words starts the
+  next curve; G0/G1/G2/G3 end the mode.
+
+LinuxCNC's G6.2 (`linuxcnc=True`) follows the same block structure with these differences: a Q
+word (interpolation method, no effect on the geometry) on the first block, knot-only lines
+written `G6.2 K_` (the G6.2 word may appear on any line of the curve), any order P >= 2, and
+incremental G91 control points refused, since their meaning is not documented for LinuxCNC.
+"""
+
+from __future__ import annotations
+
+from nurbsfeed.errors import CurveError, InputError
+from nurbsfeed.gcode.modal import AXES, G6_2, AxisPos, ModalState, tolerance
+from nurbsfeed.gcode.nurbs_block import (FeedChange, FinishedCurve, build_curve, check_block,
+                                         check_no_assignments, curve_name, feed_steps,
+                                         motion_words, point_text)
+from nurbsfeed.gcode.tokenizer import Block, Word
+
+DEFAULT_ORDER = 4
+FANUC_ORDERS = range(2, 5)  # P2..P4 (15i manual: "The valid data range for P is 2 to 4")
+
+
+class NurbsCurveReader:
+    """One G06.2 / G6.2 curve read block by block; `take` returns True once it is complete."""
+
+    def __init__(self, first: Block, state: ModalState, start: Word, linuxcnc: bool) -> None:
+        self.state = state
+        self.linuxcnc = linuxcnc
+        self.start = start
+        self.location = state.where(start)
+        self.name = curve_name(first, start)
+        self.label = "G6.2" if linuxcnc else "G06.2"
+        self.knots: list[float] = []
+        self.knot_words: list[Word] = []
+        self.points: list[tuple[float, float, float]] = []
+        self.weights: list[float] = []
+        self.decimals: dict[str, int | None] = {}
+        self.feed_before = state.feed
+        self.feed = state.feed
+        self.changes: list[FeedChange] = []
+        self.n_closing = 0  # knot-only blocks read so far
+        self.order = DEFAULT_ORDER
+        self._open(first)
+
+    # ---- the first block -----------------------------------------------------------------------
+    def _open(self, block: Block) -> None:
+        state = self.state
+        state.check_nurbs_allowed(self.start)
+        if self.linuxcnc and state.incremental:
+            raise InputError("G6.2 under G91 is not supported (LinuxCNC does not document "
+                             "incremental G6.2 control points): program the curve in G90",
+                             self.location)
+        moves = motion_words(block)
+        if moves:
+            raise InputError(f"{moves[0].name} and {self.label} are both motion codes; one per "
+                             "block", state.where(moves[0]))
+        letters = "NGPKXYZRF" + ("Q" if self.linuxcnc else "")
+        check_block(block, state, letters, {G6_2},
+                    f"the first block of a {self.label} curve (P K X Y Z R F"
+                    + (" Q" if self.linuxcnc else "") + ")")
+        order = block.first("P")
+        if order is not None:
+            valid = (order.value == int(order.value)
+                     and (order.value >= 2 if self.linuxcnc else int(order.value) in FANUC_ORDERS))
+            if not valid:
+                rule = "2 or more" if self.linuxcnc else "2, 3 or 4"
+                raise InputError(f"{order.name}: the order P is a whole number {rule} "
+                                 "(degree + 1)", state.where(order))
+            self.order = int(order.value)
+        if not any(word.letter in AXES for word in block.words):
+            raise InputError(f"the first block of a {self.label} curve needs its first control "
+                             "point (X, Y or Z)", self.location)
+        self._control_point(block)
+
+    # ---- every further block -------------------------------------------------------------------
+    def take(self, block: Block) -> bool:
+        """Read the next block of the curve; True when it was the last knot-only block."""
+        if block.is_inert:
+            return False
+        state = self.state
+        check_no_assignments(block, state)
+        moves = motion_words(block)
+        if moves or (G6_2 in block.codes("G") and not self.linuxcnc):
+            word = moves[0] if moves else block.codes("G")[G6_2]
+            raise InputError(self._ended_early(word), state.where(word))
+        axes = [word for word in block.words if word.letter in AXES]
+        knot = block.first("K")
+        if self.n_closing and knot is None:
+            raise InputError(self._ended_early(block.words[0]), state.where(block.words[0]))
+        if self.n_closing and axes:
+            raise InputError(f"control point after the knot-only blocks: all control points of a "
+                             f"curve come before its {self.order} closing K blocks",
+                             state.where(axes[0]))
+        if knot is not None and not axes:
+            check_block(block, state, "NK" + ("G" if self.linuxcnc else ""),
+                        {G6_2} if self.linuxcnc else set(),
+                        f"a knot-only block of a {self.label} curve (K)")
+            return self._closing_knot(knot)
+        check_block(block, state, "NKXYZRF" + ("G" if self.linuxcnc else ""), {G6_2},
+                    f"a {self.label} control-point block (K X Y Z R F)")
+        if knot is None:
+            raise InputError(f"control point without a knot: every control-point block of a "
+                             f"{self.label} curve carries K (Fanuc alarm PS1002)",
+                             state.where(axes[0] if axes else block.words[0]))
+        self._control_point(block)
+        return False
+
+    def _ended_early(self, word: Word) -> str:
+        does = "starts a new curve" if word.letter == "G" and word.code == G6_2 else \
+            "ends the NURBS mode"
+        if self.n_closing:
+            return (f"{word.name} comes after only {self.n_closing} of the {self.order} knot-only "
+                    f"blocks that close a {self.label} curve of order {self.order} (Fanuc alarm "
+                    "PS1004)")
+        return (f"{word.name} {does} before the curve's {self.order} knot-only K blocks (Fanuc "
+                "alarm PS1005)")
+
+    # ---- control points and knots ----------------------------------------------------------------
+    def _control_point(self, block: Block) -> None:
+        state = self.state
+        knot = block.first("K")
+        if knot is None:
+            raise InputError(f"control point without a knot: every control-point block of a "
+                             f"{self.label} curve carries K (Fanuc alarm PS1002)", self.location)
+        self._knot(knot)
+        weight = block.first("R")
+        if weight is not None and weight.value <= 0:
+            raise CurveError(f"{weight.name}: a weight R must be positive", state.where(weight))
+        point = tuple(self._coordinate(axis, block.first(axis)) for axis in AXES)
+        feed = block.first("F")
+        if feed is not None:
+            state.apply_feed(feed)
+            self.feed = state.feed
+            self.changes.append(FeedChange(knot.value, self.feed, feed))
+        self.points.append(point)  # type: ignore[arg-type]
+        self.weights.append(1.0 if weight is None else weight.value)
+
+    def _coordinate(self, axis: str, word: Word | None) -> float:
+        """This control point's coordinate on `axis` (checked against the start on the first)."""
+        state = self.state
+        if self.points:
+            previous = self.points[-1][AXES.index(axis)]
+            if word is None:
+                return previous
+            self.decimals[axis] = word.decimals
+            return previous + word.value if state.incremental else word.value
+        current = state.pos[axis]
+        if word is None or state.incremental:
+            current = state.known(axis, word or self.start,
+                                  "a G91 first control point is relative to it" if word else
+                                  f"program {axis} in the curve's first block (omitted axes keep "
+                                  "the current position)")
+        if word is None:
+            self.decimals[axis] = current.decimals
+            return current.value  # type: ignore[return-value]
+        value = current.value + word.value if state.incremental else word.value  # type: ignore
+        self.decimals[axis] = word.decimals
+        if current.value is not None:
+            tol = tolerance(current.decimals, word.decimals)
+            if abs(value - current.value) > tol:
+                raise InputError(f"first control point {point_text(axis, value)} is not the "
+                                 f"current position {point_text(axis, current.value)} (tolerance "
+                                 f"{tol:g}): a {self.label} curve starts where the tool is "
+                                 "(Fanuc alarm PS1009)", state.where(word))
+        return value
+
+    def _knot(self, word: Word) -> None:
+        """Append a knot, checking order, clamped start and repetition as it arrives."""
+        state = self.state
+        value = word.value
+        if self.knots and value < self.knots[-1]:
+            before = self.knot_words[-1]
+            raise CurveError(f"{word.name}: knots must not decrease ({before.name} on line "
+                             f"{before.line} before it) (Mitsubishi error P551)",
+                             state.where(word))
+        run = 1
+        while run <= len(self.knots) and self.knots[-run] == value:
+            run += 1
+        if run > self.order:
+            raise CurveError(f"{word.name}: knot {value:g} repeated {run} times in a row; at most "
+                             f"the order {self.order} (Fanuc alarm PS1008)", state.where(word))
+        if 0 < len(self.knots) < self.order and not self.n_closing and value != self.knots[0]:
+            first = self.knot_words[0]
+            raise CurveError(f"{word.name}: the first {self.order} knots must be equal (clamped "
+                             f"start, order {self.order}); {first.name} on line {first.line} "
+                             "starts the curve (Fanuc alarm PS1007)", state.where(word))
+        if run == self.order and not self.n_closing and value != self.knots[0]:
+            raise CurveError(f"{word.name}: interior knot {value:g} repeated {run} times (the "
+                             f"order) would split the curve in two; at most {self.order - 1}",
+                             state.where(word))
+        self.knots.append(value)
+        self.knot_words.append(word)
+
+    def _closing_knot(self, word: Word) -> bool:
+        state = self.state
+        if not self.n_closing and len(self.points) < self.order:
+            raise CurveError(f"{len(self.points)} control points are fewer than the order "
+                             f"{self.order}: a curve of order {self.order} needs at least "
+                             f"{self.order}", state.where(word))
+        if self.n_closing and word.value > self.knots[-1]:
+            first = self.knot_words[-self.n_closing]
+            raise CurveError(f"{word.name}: the last {self.order} knots must be equal (clamped "
+                             f"end, order {self.order}); {first.name} on line {first.line} is the "
+                             "first of them (Fanuc alarm PS1007)", state.where(word))
+        self._knot(word)
+        self.n_closing += 1
+        return self.n_closing == self.order
+
+    # ---- the result ------------------------------------------------------------------------------
+    def unfinished(self) -> InputError:
+        """The error for a file that ends inside this curve."""
+        if self.n_closing:
+            detail = f"it has only {self.n_closing} of its {self.order} knot-only blocks"
+        else:
+            detail = f"its {self.order} knot-only K blocks never come"
+        return InputError(f"the file ends inside the {self.label} curve started here: {detail}",
+                          self.location)
+
+    def finish(self) -> FinishedCurve:
+        curve = build_curve(self.order - 1, self.knots, self.points, self.weights, self.name,
+                            self.location)
+        feed_u, feed_mm_s = feed_steps(curve.u_min, curve.u_max, self.feed_before, self.changes,
+                                       self.state, self.location)
+        end = {axis: AxisPos(self.points[-1][i], self.decimals.get(axis))
+               for i, axis in enumerate(AXES)}
+        return FinishedCurve(curve, self.location, feed_u, feed_mm_s, end, self.feed, G6_2)

@@ -1,0 +1,121 @@
+"""G-code program -> stream of PassThrough lines and CurveBlocks (program.py), line by line.
+
+Call chain for one line: `tokenizer.tokenize_line` -> if a NURBS block is open, its reader
+(`fanuc.NurbsCurveReader` or `linuxcnc.G52BlockReader`) takes the block, and the CurveBlock is
+yielded when the block completes; otherwise `_start` decides whether the block opens a NURBS
+block, and if not `modal.ModalState.apply` executes it and the line passes through unchanged.
+Parameter assignments take effect after their line.
+
+Dialect dispatch. `fanuc`: G06.2 curves (a Q word is an error, G5.2 is refused). `linuxcnc`: G5.2
+blocks and G6.2 curves with LinuxCNC's rules. `auto`: G5.2 is LinuxCNC; G6.2 is LinuxCNC when its
+first block has a Q word, Fanuc otherwise; a curve that continues a modal G6.2 follows the rules
+of the curve before it.
+
+Only the lines of the NURBS block being read are held (their line ending, in fact); everything
+else streams, so a program of any length is read in constant memory.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Iterator
+
+from nurbsfeed.errors import InputError
+from nurbsfeed.gcode.fanuc import NurbsCurveReader
+from nurbsfeed.gcode.linuxcnc import G52BlockReader
+from nurbsfeed.gcode.modal import AXES, G5_2, G5_3, G6_2, ModalState
+from nurbsfeed.gcode.nurbs_block import FinishedCurve, motion_words
+from nurbsfeed.gcode.tokenizer import Block, Param, iter_lines, tokenize_line
+from nurbsfeed.program import CurveBlock, PassThrough, ProgramItem
+
+DIALECTS = ("auto", "fanuc", "linuxcnc")
+
+
+def read_gcode(path: Path, text: str, dialect: str = "auto") -> Iterator[ProgramItem]:
+    """The program in `text` (read from `path`) as items in file order, streamed.
+
+    `text` keeps its line endings; the PassThrough texts and the lines the CurveBlocks stand for
+    concatenate to it exactly. Raises InputError (or CurveError) at FILE:LINE:COL of the word at
+    fault, when the stream reaches it; an unknown dialect is refused at once.
+    """
+    if dialect not in DIALECTS:
+        raise InputError(f"unknown G-code dialect '{dialect}' (use auto, fanuc or linuxcnc)")
+    return _Reader(str(path), dialect).items(text)
+
+
+class _Reader:
+    """The state of one read: modal state, parameters, and the NURBS block being read."""
+
+    def __init__(self, path: str, dialect: str) -> None:
+        self.path = path
+        self.dialect = dialect
+        self.state = ModalState(path)
+        self.params: dict[int, Param] = {}
+        self.open: NurbsCurveReader | G52BlockReader | None = None
+        self.eol = "\n"
+        self.last_curve: NurbsCurveReader | None = None  # the modal G6.2 curve's rules
+
+    def items(self, text: str) -> Iterator[ProgramItem]:
+        for line, line_text in iter_lines(text):
+            block = tokenize_line(line_text, line, self.path, self.params)
+            if self.open is not None:
+                if self.open.take(block):
+                    yield self._curve_block(self.open.finish())
+                    self.open = None
+            else:
+                self.open = self._start(block)
+                if self.open is None:
+                    self.state.apply(block)
+                    yield PassThrough(line_text)
+                else:
+                    self.eol = block.eol or "\n"
+            for assignment in block.assignments:
+                self.params[assignment.number] = assignment.param
+        if self.open is not None:
+            raise self.open.unfinished()
+
+    def _start(self, block: Block) -> NurbsCurveReader | G52BlockReader | None:
+        """The reader of the NURBS block this block opens, or None for an ordinary block."""
+        g = block.codes("G")
+        state = self.state
+        if G6_2 in g:
+            question = block.first("Q")
+            linuxcnc = self.dialect == "linuxcnc" or (self.dialect == "auto"
+                                                     and question is not None)
+            self.last_curve = NurbsCurveReader(block, state, g[G6_2], linuxcnc)
+            return self.last_curve
+        if G5_2 in g:
+            if self.dialect == "fanuc":
+                raise InputError("G5.2 is LinuxCNC's NURBS block; read this file with --dialect "
+                                 "linuxcnc (or auto)", state.where(g[G5_2]))
+            return G52BlockReader(block, state, g[G5_2])
+        if G5_3 in g:
+            raise InputError("G5.3 without G5.2 first (LinuxCNC: Cannot use G5.3 without G5.2 "
+                             "first)", state.where(g[G5_3]))
+        previous = self.last_curve
+        if (state.motion != G6_2 or previous is None or state.cycle is not None
+                or motion_words(block)):
+            return None
+        knot = block.first("K")
+        axes = [word for word in block.words if word.letter in AXES]
+        if knot is not None and axes:
+            start = next(word for word in block.words if word.letter != "N")
+            self.last_curve = NurbsCurveReader(block, state, start, previous.linuxcnc)
+            return self.last_curve
+        if knot is not None:
+            raise InputError(f"{knot.name}: knot-only block after the curve ended; a curve of "
+                             f"order {previous.order} closes with exactly {previous.order} K "
+                             "blocks", state.where(knot))
+        if axes:
+            raise InputError(f"{axes[0].name} in NURBS mode without a knot: a {previous.label} "
+                             "control point carries K (Fanuc alarm PS1002); write G1 for a "
+                             "straight move", state.where(axes[0]))
+        return None
+
+    def _curve_block(self, finished: FinishedCurve) -> CurveBlock:
+        state = self.state
+        state.end_curve(finished.end, finished.feed, finished.motion)
+        return CurveBlock(curve=finished.curve, location=finished.location, units=state.units,
+                          eol=self.eol, incremental=state.incremental,
+                          feed_word_after=None if finished.feed is None else finished.feed.word,
+                          feed_u=finished.feed_u, feed_mm_s=finished.feed_mm_s)

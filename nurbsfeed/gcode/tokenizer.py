@@ -1,0 +1,301 @@
+"""One G-code line -> words, each with its line and column (1-based, in characters).
+
+The lexical rules, shared by Fanuc and LinuxCNC programs:
+
+- A word is a letter and a number: `X10.5`, `x-.5`, `X 10.0`, `G01X0Y0` (spaces may sit between the
+  letter, the sign and the digits; digits themselves are contiguous). `N`, `O`, `G`, `M`, `F` are
+  words like any other. A number without a decimal point means its face value (`X10` is 10.0, the
+  "calculator-type" input of LinuxCNC and of Fanuc with parameter DPI set); the digits written
+  after the point are kept as `Word.decimals`, the precision the program was written to.
+- Comments: `( ... )` anywhere, `;` to the end of the line.
+- `%` alone at the start of a line is the program delimiter; the line has no words.
+- `/` (optionally `/1`..`/9`, Fanuc optional block skip) as the first character: block delete.
+- Literal numbered parameters: `#1=10.5` (or `#1=#2`) assigns, `X#1` / `F#1` / `X-#1` reads. As in
+  the LinuxCNC interpreter, assignments on a line take effect after the whole line is read, so
+  `#1=5 X#1` reads the value #1 had before the line. Reading a parameter that was never assigned
+  is an error (LinuxCNC would read 0, Fanuc <vacant>: both are almost always a mistake here).
+- Not supported, each with its own message: expressions `[...]`, named parameters `#<name>`,
+  macro / O-word statements (IF, WHILE, GOTO, `o100 sub`, ...).
+
+Values are checked here once: finite, and for G and M at most one decimal (`G06.2` == `G6.2`,
+compared as `Word.code`, tenths as an integer: G6.2 -> 62, G01 -> 10, G17 -> 170).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+from typing import Iterator, Mapping
+
+from nurbsfeed.errors import InputError, Location
+
+_NUMBER = re.compile(r"[+-]?\s*(?:\d+(?:\.\d*)?|\.\d+)")
+_PARAM_REF = re.compile(r"([+-]?)\s*#\s*(\d+)")
+_ASSIGN = re.compile(r"#\s*(\d+)\s*=")
+_LETTER_RUN = re.compile(r"[A-Za-z]{2,}")
+_FUNCTION = re.compile(r"([A-Za-z]{2,})\s*\[")
+_EOL = re.compile(r"\r?\n\Z")
+_LINE = re.compile(r"[^\n]*\n|[^\n]+\Z")
+
+# Letter runs that open a macro / O-word statement (Fanuc custom macro B, LinuxCNC O-codes).
+KEYWORDS = frozenset({
+    "IF", "THEN", "ELSE", "ELSEIF", "ENDIF", "WHILE", "ENDWHILE", "DO", "END", "GOTO",
+    "SUB", "ENDSUB", "CALL", "RETURN", "REPEAT", "ENDREPEAT", "BREAK", "CONTINUE",
+    "POPEN", "PCLOS", "DPRNT", "BPRNT", "SETVN",
+})
+BAD_PARAMETER = ("'#' must be followed by a parameter number (#1=10.5, X#1); named (#<name>) "
+                 "and indirect (##1) parameters are not supported")
+CODE_LIMIT = 10000.0  # G and M numbers above this are typos, and would overflow `code`
+
+
+@dataclass(frozen=True)
+class Param:
+    """A parameter value and the fractional digits it was written with (None: none written)."""
+
+    value: float
+    decimals: int | None
+
+
+@dataclass(frozen=True)
+class Word:
+    """A letter and its value. `text` is the value as written, spaces removed ("-.5", "#3")."""
+
+    letter: str
+    value: float
+    text: str
+    decimals: int | None
+    line: int
+    col: int
+
+    @property
+    def code(self) -> int:
+        """G/M number in tenths: G6.2 -> 62, G1 -> 10 (only meaningful for G and M)."""
+        return round(self.value * 10)
+
+    @property
+    def name(self) -> str:
+        """The word as a user reads it: "X10.5", "G6.2", "F#1"."""
+        return f"{self.letter}{self.text}"
+
+
+@dataclass(frozen=True)
+class Assignment:
+    """`#number=value` on a line, applied after the line is read."""
+
+    number: int
+    param: Param
+    col: int
+
+
+@dataclass(frozen=True)
+class Block:
+    """One line: its words in order, its assignments, and how it ends."""
+
+    line: int
+    words: tuple[Word, ...]
+    assignments: tuple[Assignment, ...] = ()
+    block_delete: bool = False
+    delimiter: bool = False  # a '%' line
+    eol: str = "\n"
+
+    def first(self, letter: str) -> Word | None:
+        """The first word with this letter, or None."""
+        for word in self.words:
+            if word.letter == letter:
+                return word
+        return None
+
+    def letters(self) -> set[str]:
+        return {word.letter for word in self.words}
+
+    def codes(self, letter: str) -> dict[int, Word]:
+        """G (or M) codes of the block: code -> word."""
+        return {word.code: word for word in self.words if word.letter == letter}
+
+    @property
+    def is_inert(self) -> bool:
+        """Nothing to execute: blank, comment-only, `%`, or only a sequence number N."""
+        return not self.assignments and all(word.letter == "N" for word in self.words)
+
+
+def iter_lines(text: str) -> Iterator[tuple[int, str]]:
+    """(1-based line number, line including its "\\n" or "\\r\\n"), lazily.
+
+    Only "\\n" ends a line, so a lone "\\r" stays inside its line (where it counts as a space) and
+    "".join of the lines is `text` exactly.
+    """
+    for number, match in enumerate(_LINE.finditer(text), start=1):
+        yield number, match.group()
+
+
+def code_name(letter: str, code: int) -> str:
+    """62 -> "G6.2", 10 -> "G1": the normalised spelling used in messages."""
+    whole, tenth = divmod(code, 10)
+    return f"{letter}{whole}" + (f".{tenth}" if tenth else "")
+
+
+def printable(text: str) -> str:
+    """Text safe to print: undecodable bytes (kept as surrogates) as \\xNN, controls escaped."""
+    shown = []
+    for char in text:
+        if 0xDC80 <= ord(char) <= 0xDCFF:
+            shown.append(f"\\x{ord(char) - 0xDC00:02x}")
+        elif char.isprintable():
+            shown.append(char)
+        else:
+            shown.append(repr(char)[1:-1])
+    return "".join(shown)
+
+
+def _decimals(text: str) -> int | None:
+    _, point, frac = text.partition(".")
+    return len(frac) if point and frac else None
+
+
+class _Scanner:
+    """Walks one line's body; every error names the column where the scanner stands."""
+
+    def __init__(self, body: str, line: int, path: str, params: Mapping[int, Param]) -> None:
+        self.body = body
+        self.line = line
+        self.path = path
+        self.params = params
+        self.pos = 0
+
+    def error(self, message: str, pos: int | None = None) -> InputError:
+        col = (self.pos if pos is None else pos) + 1
+        return InputError(message, Location(self.path, self.line, col))
+
+    def skip_spaces(self) -> None:
+        while self.pos < len(self.body) and self.body[self.pos] in " \t\r":
+            self.pos += 1
+
+    def at_end(self) -> bool:
+        return self.pos >= len(self.body)
+
+    def peek(self) -> str:
+        return self.body[self.pos] if self.pos < len(self.body) else ""
+
+    def snippet(self) -> str:
+        rest = self.body[self.pos:self.pos + 8].rstrip()
+        return f"'{printable(rest)}'" if rest else "the end of the line"
+
+    def value(self, owner: str, owner_pos: int) -> tuple[float, str, int | None]:
+        """A number or a parameter read after a letter (or after `#n=`): value, text, decimals."""
+        self.skip_spaces()
+        if self.peek() == "[":
+            raise self.error("expressions in [...] are not supported; write the value as a "
+                             "number")
+        function = _FUNCTION.match(self.body, self.pos)
+        if function:
+            raise self.error(f"'{function.group(1)}[...]' is an expression; expressions are not "
+                             "supported, write the value as a number")
+        if owner == "O" and self.peek() == "<":
+            raise self.error("'O<name>' starts an O-word statement; nurbsfeed reads literal "
+                             "G-code only (no subroutines, IF/WHILE/GOTO or expressions)")
+        ref = _PARAM_REF.match(self.body, self.pos)
+        if ref:
+            number = int(ref.group(2))
+            if number not in self.params:
+                raise self.error(f"#{number} is used before it is assigned (write #{number}="
+                                 "value on an earlier line)")
+            param = self.params[number]
+            self.pos = ref.end()
+            sign = -1.0 if ref.group(1) == "-" else 1.0
+            return sign * param.value, f"{ref.group(1)}#{number}", param.decimals
+        if self.peek() == "#":
+            raise self.error(BAD_PARAMETER)
+        number = _NUMBER.match(self.body, self.pos)
+        if not number:
+            raise self.error(f"{owner} has no number after it (found {self.snippet()}); write "
+                             f"e.g. {owner}10.5", owner_pos)
+        text = re.sub(r"\s", "", number.group())
+        value = float(text)
+        if not math.isfinite(value):
+            shown = text if len(text) <= 24 else text[:20] + "..."
+            raise self.error(f"{owner}{shown} is too large to be a number", owner_pos)
+        self.pos = number.end()
+        return value, text, _decimals(text)
+
+
+def tokenize_line(line_text: str, line: int, path: str,
+                  params: Mapping[int, Param]) -> Block:
+    """Split one line (with or without its line ending) into a Block.
+
+    `params` are the parameter values before this line; the line's own assignments are returned
+    in `Block.assignments` for the caller to apply afterwards. Raises InputError at the column of
+    the offending character or word.
+    """
+    eol_match = _EOL.search(line_text)
+    eol = eol_match.group() if eol_match else ""
+    body = line_text[:len(line_text) - len(eol)]
+    scan = _Scanner(body, line, path, params)
+    scan.skip_spaces()
+    if scan.peek() == "%":
+        return Block(line, (), delimiter=True, eol=eol)
+    block_delete = False
+    if scan.peek() == "/":
+        block_delete = True
+        scan.pos += 1
+        if scan.peek().isdigit():
+            scan.pos += 1
+    words: list[Word] = []
+    assignments: list[Assignment] = []
+    while True:
+        scan.skip_spaces()
+        if scan.at_end():
+            break
+        char = scan.peek()
+        start = scan.pos
+        if char == "(":
+            close = body.find(")", start)
+            if close < 0:
+                raise scan.error("comment '(' is not closed by ')' on this line")
+            scan.pos = close + 1
+        elif char == ";":
+            break
+        elif char.isalpha() and char.isascii():
+            run = _LETTER_RUN.match(body, start)
+            if run and run.group().upper() in KEYWORDS:
+                raise scan.error(f"'{run.group()}' starts a macro or O-word statement; nurbsfeed "
+                                 "reads literal G-code only (no subroutines, IF/WHILE/GOTO or "
+                                 "expressions)")
+            function = _FUNCTION.match(body, start)
+            if function:
+                raise scan.error(f"'{function.group(1)}[...]' is an expression; expressions are "
+                                 "not supported, write the value as a number")
+            letter = char.upper()
+            scan.pos += 1
+            value, text, decimals = scan.value(letter, start)
+            if letter in "GM":
+                if not 0.0 <= value <= CODE_LIMIT or abs(value * 10 - round(value * 10)) > 1e-6:
+                    raise scan.error(f"{letter}{text} is not a {letter} code (a whole number or "
+                                     f"one decimal, e.g. {letter}6.2)", start)
+            words.append(Word(letter, value, text, decimals, line, start + 1))
+        elif char == "#":
+            assign = _ASSIGN.match(body, start)
+            if not assign:
+                ref = _PARAM_REF.match(body, start)
+                if ref:
+                    raise scan.error(f"'#{ref.group(2)}' must be assigned (#{ref.group(2)}="
+                                     f"value) or follow a letter (X#{ref.group(2)})")
+                raise scan.error(BAD_PARAMETER)
+            scan.pos = assign.end()
+            number = int(assign.group(1))
+            value, _, decimals = scan.value(f"#{number}=", start)
+            assignments.append(Assignment(number, Param(value, decimals), start + 1))
+        elif char == "[":
+            raise scan.error("expressions in [...] are not supported; write the value as a "
+                             "number")
+        elif char == "/":
+            raise scan.error("'/' (block delete) must be the first character of the line")
+        elif char.isdigit() or char in "+-.":
+            number = _NUMBER.match(body, start)
+            shown = re.sub(r"\s", "", number.group()) if number else char
+            raise scan.error(f"'{shown}' has no letter in front of it (a word is a letter and a "
+                             "number, e.g. X10.5)")
+        else:
+            raise scan.error(f"unexpected character '{printable(char)}' (a word is a letter and "
+                             "a number, e.g. X10.5)")
+    return Block(line, tuple(words), tuple(assignments), block_delete, False, eol)

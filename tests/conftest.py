@@ -1,0 +1,34 @@
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from nurbsfeed.geometry import NurbsCurve
+from nurbsfeed.machine import load_machine
+from nurbsfeed.planning.limits import Limits
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLES = ROOT / "samples"
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption("--update-golden", action="store_true",
+                     help="Rewrite the golden output files instead of comparing with them.")
+
+
+def load_curve(name: str) -> NurbsCurve:
+    raw = json.loads((SAMPLES / f"{name}.json").read_text())["curves"][0]
+    return NurbsCurve.build(raw["degree"], raw["knots"], raw["control_points"],
+                            raw.get("weights"), raw.get("name", name))
+
+
+@pytest.fixture(scope="session")
+def butterfly() -> NurbsCurve:
+    return load_curve("butterfly")
+
+
+@pytest.fixture(scope="session")
+def paper_limits() -> Limits:
+    return Limits.from_machine(load_machine("paper-table1"))

@@ -1,0 +1,93 @@
+"""A textbook NURBS evaluator that lives only in the tests: the oracle for nurbsfeed.geometry.
+
+Cox-de Boor recursion straight from the definition (paper Eq. 2) with the 0/0 := 0 convention,
+derivatives of the basis from N'_{i,p} = p/(u_{i+p}-u_i) N_{i,p-1} - p/(u_{i+p+1}-u_{i+1}) N_{i+1,p-1},
+and the quotient rule for the rational curve. Slow and obviously right.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def _ratio(num: float, den: float) -> float:
+    return 0.0 if den == 0.0 else num / den
+
+
+def basis(i: int, p: int, u: float, knots: np.ndarray) -> float:
+    if p == 0:
+        last = knots[-1]
+        if knots[i] <= u < knots[i + 1]:
+            return 1.0
+        # the right end belongs to the last non-empty span
+        if u == last and knots[i] < knots[i + 1] == last:
+            return 1.0
+        return 0.0
+    return (_ratio(u - knots[i], knots[i + p] - knots[i]) * basis(i, p - 1, u, knots)
+            + _ratio(knots[i + p + 1] - u, knots[i + p + 1] - knots[i + 1])
+            * basis(i + 1, p - 1, u, knots))
+
+
+def basis_derivative(i: int, p: int, u: float, knots: np.ndarray, order: int) -> float:
+    if order == 0:
+        return basis(i, p, u, knots)
+    if order > p:
+        return 0.0
+    return p * (_ratio(1.0, knots[i + p] - knots[i]) * basis_derivative(i, p - 1, u, knots,
+                                                                          order - 1)
+                - _ratio(1.0, knots[i + p + 1] - knots[i + 1])
+                * basis_derivative(i + 1, p - 1, u, knots, order - 1))
+
+
+def evaluate(degree: int, knots, points, weights, u: float):
+    """C(u), C'(u), C''(u) as three (3,) arrays."""
+    knots = np.asarray(knots, float)
+    pts = np.asarray(points, float)
+    if pts.shape[1] == 2:
+        pts = np.column_stack([pts, np.zeros(len(pts))])
+    w = np.asarray(weights, float)
+    a = [np.zeros(3) for _ in range(3)]
+    wd = [0.0, 0.0, 0.0]
+    for i in range(len(pts)):
+        for order in range(3):
+            n = basis_derivative(i, degree, u, knots, order)
+            a[order] = a[order] + n * w[i] * pts[i]
+            wd[order] += n * w[i]
+    c0 = a[0] / wd[0]
+    c1 = (a[1] - wd[1] * c0) / wd[0]
+    c2 = (a[2] - 2.0 * wd[1] * c1 - wd[2] * c0) / wd[0]
+    return c0, c1, c2
+
+
+def curvature(c1: np.ndarray, c2: np.ndarray) -> float:
+    return float(np.linalg.norm(np.cross(c1, c2)) / np.linalg.norm(c1) ** 3)
+
+
+def length(degree: int, knots, points, weights, a: float, b: float, n: int = 4000) -> float:
+    """Arc length by composite Gauss-Legendre on the naive |C'| (a different rule than ours).
+
+    The panels also break at every knot: |C'| is only piecewise smooth.
+    """
+    x, wq = np.polynomial.legendre.leggauss(8)
+    edges = np.union1d(np.linspace(a, b, n + 1),
+                       [k for k in np.asarray(knots, float) if a < k < b])
+    total = 0.0
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        for xi, wi in zip(x, wq):
+            u = 0.5 * (lo + hi) + 0.5 * (hi - lo) * xi
+            total += 0.5 * (hi - lo) * wi * np.linalg.norm(evaluate(degree, knots, points,
+                                                                    weights, u)[1])
+    return total
+
+
+def chord_speed_limit(kappa: float, period_s: float, chord_mm: float, acc: float,
+                      jerk: float, feed: float) -> float:
+    """Eq. 15 (corrected) written directly in rho, independent of the product's formula."""
+    if kappa == 0.0:
+        return feed
+    rho = 1.0 / kappa
+    chord = (2.0 / period_s) * math.sqrt(2.0 * rho * chord_mm - chord_mm**2) if chord_mm < rho \
+        else 2.0 * rho / period_s
+    return min(feed, chord, math.sqrt(acc * rho), (jerk * rho * rho) ** (1.0 / 3.0))

@@ -1,0 +1,119 @@
+"""Geometry against the textbook oracle (tests/naive_nurbs.py), plus invariants."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nurbsfeed.errors import CurveError
+from nurbsfeed.geometry import NurbsCurve
+from nurbsfeed.geometry.arclength import simpson_lengths
+from nurbsfeed.geometry.kernel import eval_d1, find_span
+from nurbsfeed.geometry.nurbs import curvature_from_derivatives
+from nurbsfeed.planning.grid import build_grid
+from tests import naive_nurbs
+from tests.conftest import load_curve
+
+
+def random_curve(rng: np.random.Generator) -> NurbsCurve:
+    """Degree 1-5, 2-D or 3-D, rational, sometimes with repeated interior knots, any range."""
+    degree = int(rng.integers(1, 6))
+    n = int(rng.integers(degree + 1, degree + 9))
+    interior = np.sort(rng.uniform(0, 1, n - degree - 1))
+    if interior.size >= 2 and degree >= 2 and rng.random() < 0.5:
+        interior[1] = interior[0]  # multiplicity 2
+    lo, span = rng.uniform(-5, 5), rng.uniform(0.5, 20)
+    knots = lo + span * np.concatenate([np.zeros(degree + 1), interior, np.ones(degree + 1)])
+    dim = int(rng.integers(2, 4))
+    pts = rng.uniform(-50, 50, (n, dim))
+    weights = rng.uniform(0.3, 3.0, n)
+    return NurbsCurve.build(degree, knots, pts, weights)
+
+
+def sample_params(curve: NurbsCurve, rng: np.random.Generator) -> np.ndarray:
+    inner = rng.uniform(curve.u_min, curve.u_max, 6)
+    return np.concatenate([[curve.u_min, curve.u_max], inner, curve.span_breaks[1:-1] + 1e-9])
+
+
+@pytest.mark.parametrize("seed", range(25))
+def test_vectorised_and_kernel_evaluation_match_the_textbook_oracle(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    curve = random_curve(rng)
+    u = sample_params(curve, rng)
+    c0, c1, c2 = curve.derivatives(u)
+    p = curve.degree
+    work = [np.empty(p + 1) for _ in range(4)]
+    p_out, d_out = np.empty(3), np.empty(3)
+    scale = np.max(np.abs(curve.points)) + 1.0
+    for k, uk in enumerate(u):
+        n0, n1, n2 = naive_nurbs.evaluate(p, curve.knots, curve.points, curve.weights, uk)
+        dscale = scale * (1 + np.linalg.norm(n1))
+        assert np.allclose(c0[k], n0, atol=1e-9 * scale)
+        assert np.allclose(c1[k], n1, atol=1e-8 * dscale)
+        assert np.allclose(c2[k], n2, atol=1e-7 * dscale * (1 + np.linalg.norm(n2)))
+        span = find_span(curve.knots, p, curve.n_ctrl, uk, -1)
+        eval_d1(curve.knots, curve.homogeneous, p, uk, span, *work, p_out, d_out)
+        assert np.allclose(p_out, n0, atol=1e-9 * scale)
+        assert np.allclose(d_out, n1, atol=1e-8 * dscale)
+
+
+def test_clamped_curve_starts_and_ends_on_its_end_control_points() -> None:
+    curve = random_curve(np.random.default_rng(7))
+    ends = curve.point(np.array([curve.u_min, curve.u_max]))
+    assert np.allclose(ends, curve.points[[0, -1]], atol=1e-12)
+
+
+def test_exact_circle_has_constant_curvature_radius_and_length() -> None:
+    circle = load_curve("circle")
+    u = np.linspace(circle.u_min, circle.u_max, 997)
+    c0, c1, c2 = circle.derivatives(u)
+    assert np.allclose(np.linalg.norm(c0 - [50.0, 0.0, 0.0], axis=1), 50.0, atol=1e-12)
+    assert np.allclose(curvature_from_derivatives(c1, c2), 0.02, rtol=1e-12)
+    grid = build_grid(circle, 0.1)
+    assert grid.length_mm == pytest.approx(100 * np.pi, abs=1e-9)
+    assert grid.peak_index.size == 0 or np.ptp(grid.kappa_1_mm) < 1e-12
+
+
+def test_adaptive_simpson_agrees_with_gauss_legendre_on_the_oracle(butterfly) -> None:
+    a, b = np.array([0.0, 0.2, 0.5]), np.array([0.05, 0.37, 1.0])
+    ours = simpson_lengths(butterfly.speed, a, b, np.full(3, 1e-10))
+    for k in range(3):
+        ref = naive_nurbs.length(3, butterfly.knots, butterfly.points, butterfly.weights,
+                                 a[k], b[k], n=200)
+        assert ours[k] == pytest.approx(ref, rel=1e-9)
+
+
+BAD_CURVES = [
+    (dict(degree=0, knots=[0, 1], points=[[0, 0]]), "degree must be a whole number >= 1, not 0"),
+    (dict(degree=2.5, knots=[0, 1], points=[[0, 0]]),
+     "degree must be a whole number >= 1, not 2.5"),
+    (dict(degree=3, knots=[0, 0, 0, 0, 1, 1, 1, 1], points=[[0, 0], [1, 1], [2, 0]]),
+     "a curve of degree 3 needs at least 4 control points, got 3"),
+    (dict(degree=2, knots=[0, 0, 0, 1, 1], points=[[0, 0], [1, 1], [2, 0]]),
+     "3 control points of degree 2 need 6 knots (control points + order), got 5"),
+    (dict(degree=2, knots=[0, 0, 0, 1, 1, 1], points=[[0, 0], [1, 1], [2, 0]],
+          weights=[1, 0, 1]), "weight 1 must be positive and finite, not 0.0"),
+    (dict(degree=2, knots=[0, 0, 0, 1, 1, 1], points=[[0, 0], [1, 1], [2, 0]],
+          weights=[1, 1]), "3 control points need 3 weights, got 2"),
+    (dict(degree=1, knots=[0, 0, 0.5, 0.4, 1, 1], points=[[0, 0], [1, 1], [2, 0], [3, 3]]),
+     "knots must not decrease: knot 3 (0.4) < knot 2 (0.5)"),
+    (dict(degree=2, knots=[0, 0, 0.1, 0.5, 1, 1, 1], points=[[0, 0], [1, 1], [2, 0], [3, 3]]),
+     "knot vector must be clamped: the first 3 and the last 3 knots must be equal (order 3)"),
+    (dict(degree=1, knots=[2, 2, 2, 2], points=[[0, 0], [1, 1]]),
+     "knot range is empty: all knots are 2"),
+    (dict(degree=2, knots=[0, 0, 0, 0.5, 0.5, 0.5, 1, 1, 1],
+          points=[[0, 0], [1, 1], [2, 0], [3, 3], [4, 0], [5, 5]]),
+     "interior knot 0.5 is repeated 3 times; at most 2 (the degree) keeps the curve connected"),
+    (dict(degree=1, knots=[0, 0, 1, 1], points=[[0, float("nan")], [1, 1]]),
+     "control point 0 is not finite: [0.0, nan]"),
+    (dict(degree=1, knots=[0, 0, 1, 1], points=[[0, 0, 0, 0], [1, 1, 1, 1]]),
+     "control points must be lists of 2 or 3 numbers, got an array of shape (2, 4)"),
+]
+
+
+@pytest.mark.parametrize(("fields", "message"), BAD_CURVES)
+def test_invalid_curves_are_rejected_naming_field_and_value(fields, message) -> None:
+    with pytest.raises(CurveError) as err:
+        NurbsCurve.build(fields["degree"], fields["knots"], fields["points"],
+                         fields.get("weights"))
+    assert str(err.value) == message
