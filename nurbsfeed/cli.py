@@ -89,10 +89,8 @@ def expand_inputs(inputs: tuple[str, ...]) -> list[Path]:
             if path.is_dir():
                 paths += sorted(p for p in path.iterdir()
                                 if p.is_file() and p.suffix.lower() in GCODE_SUFFIXES)
-            elif not path.exists():
-                raise click.UsageError(f"input '{match}' does not exist")
             else:
-                paths.append(path)
+                paths.append(path)  # a missing file fails on its own, not the batch
     if not paths:
         raise click.UsageError("no input files")
     return paths

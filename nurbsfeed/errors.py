@@ -17,10 +17,12 @@ class Location:
     """Where in a user's file something is: 1-based line and column."""
 
     file: str
-    line: int = 1
+    line: int | None = None  # None: the file as a whole (e.g. it cannot be read)
     col: int = 1
 
     def __str__(self) -> str:
+        if self.line is None:
+            return self.file
         return f"{self.file}:{self.line}:{self.col}"
 
 

@@ -26,14 +26,22 @@ def _key_location(text: str, path: str, key: str, occurrence: int) -> Location:
     hits = [m.start() for m in re.finditer(re.escape(f'"{key}"'), text)]
     if not hits:
         return Location(path, 1, 1)
-    pos = hits[min(occurrence, len(hits) - 1)]
-    line = text.count("\n", 0, pos) + 1
-    col = pos - (text.rfind("\n", 0, pos) + 1) + 1
-    return Location(path, line, col)
+    return _text_location(text, path, hits[min(occurrence, len(hits) - 1)])
+
+
+class _NonStandardNumber(ValueError):
+    def __init__(self, name: str) -> None:
+        super().__init__(f"{name} is not a number JSON allows")
+        self.name = name
 
 
 def _reject_constants(name: str) -> Any:
-    raise ValueError(f"{name} is not a number JSON allows")
+    raise _NonStandardNumber(name)
+
+
+def _text_location(text: str, path: str, pos: int) -> Location:
+    line = text.count("\n", 0, pos) + 1
+    return Location(path, line, pos - (text.rfind("\n", 0, pos) + 1) + 1)
 
 
 def read_json_curves(path: Path, text: str) -> tuple[str, list[tuple[NurbsCurve, float]]]:
@@ -44,11 +52,12 @@ def read_json_curves(path: Path, text: str) -> tuple[str, list[tuple[NurbsCurve,
     except json.JSONDecodeError as exc:
         raise InputError(f"not valid JSON: {exc.msg}",
                          Location(where, exc.lineno, exc.colno)) from None
-    except ValueError as exc:
-        raise InputError(f"not valid JSON: {exc}", Location(where)) from None
+    except _NonStandardNumber as exc:
+        raise InputError(f"not valid JSON: {exc}",
+                         _text_location(text, where, max(text.find(exc.name), 0))) from None
     if not isinstance(data, dict):
         raise InputError("expected a JSON object with 'curves' (or a single curve object)",
-                         Location(where))
+                         Location(where, 1, 1))
     units = data.get("units", "mm")
     if units not in ("mm", "in"):
         raise InputError(f"'units' must be \"mm\" or \"in\", not {units!r}",

@@ -56,42 +56,52 @@ INT_KEYS = ("decimals", "feed_decimals")
 INT_RANGES = {"decimals": (0, 8), "feed_decimals": (0, 6)}
 
 
-def _check_value(key: str, value: Any, where: str) -> float | int:
+def _check_value(key: str, value: Any) -> float | int:
+    """One key's value, checked; ProfileError (without a place) when it is not valid."""
     if key in INT_KEYS:
         low, high = INT_RANGES[key]
         if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
-            raise ProfileError(f"{where}: '{key}' must be a whole number from {low} to {high}, "
+            raise ProfileError(f"'{key}' must be a whole number from {low} to {high}, "
                                f"not {value!r}")
         return value
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ProfileError(f"{where}: '{key}' must be a number, not {value!r}")
+        raise ProfileError(f"'{key}' must be a number, not {value!r}")
     if not math.isfinite(value) or value <= 0:
-        raise ProfileError(f"{where}: '{key}' must be positive and finite, not {value!r}")
+        raise ProfileError(f"'{key}' must be positive and finite, not {value!r}")
     return float(value)
 
 
-def machine_from_mapping(data: Any, where: str,
+def machine_from_mapping(data: Any, where: str, places: Mapping[str, Location] | None = None,
                          overrides: Mapping[str, Any] | None = None) -> Machine:
-    """Validate a parsed profile (`where` names it in messages) and apply CLI overrides."""
+    """Validate a parsed profile and apply CLI overrides.
+
+    where: the profile's name for messages; places: the location of each key in the file.
+    """
+    places = places or {}
+    here = Location(where)
     if not isinstance(data, dict):
-        raise ProfileError(f"{where}: a machine profile is a mapping of keys to values, "
-                           f"not {type(data).__name__}")
+        raise ProfileError("a machine profile is a mapping of keys to values, not "
+                           f"{type(data).__name__}", here)
     known = set(FLOAT_KEYS) | set(INT_KEYS)
     for key in data:
         if key not in known:
-            raise ProfileError(f"{where}: unknown key '{key}' (known keys: "
-                               f"{', '.join(sorted(known))})")
+            raise ProfileError(f"unknown key '{key}' (known keys: {', '.join(sorted(known))})",
+                               places.get(key, here))
     values: dict[str, float | int] = {}
-    for key in FLOAT_KEYS:
-        if key not in data:
-            raise ProfileError(f"{where}: missing key '{key}'")
-        values[key] = _check_value(key, data[key], where)
-    for key in INT_KEYS:
+    for key in FLOAT_KEYS + INT_KEYS:
         if key in data:
-            values[key] = _check_value(key, data[key], where)
+            try:
+                values[key] = _check_value(key, data[key])
+            except ProfileError as exc:
+                raise exc.at(places.get(key, here)) from None
+        elif key in FLOAT_KEYS:
+            raise ProfileError(f"missing key '{key}'", here)
     for key, value in (overrides or {}).items():
         if value is not None:
-            values[key] = _check_value(key, value, f"option --{key.replace('_', '-')}")
+            try:
+                values[key] = _check_value(key, value)
+            except ProfileError as exc:
+                raise ProfileError(f"option --{key.replace('_', '-')}: {exc.message}") from None
     return Machine(**values)  # type: ignore[arg-type]
 
 
@@ -101,6 +111,15 @@ def builtin_profiles() -> list[str]:
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".yaml"))
 
 
+def _key_places(text: str, where: str) -> dict[str, Location]:
+    """Line and column of each top-level key, from the YAML node tree."""
+    node = yaml.compose(text)
+    if not isinstance(node, yaml.MappingNode):
+        return {}
+    return {str(k.value): Location(where, k.start_mark.line + 1, k.start_mark.column + 1)
+            for k, _ in node.value}
+
+
 def load_machine(name_or_path: str, overrides: Mapping[str, Any] | None = None) -> Machine:
     """A profile by built-in name (`default`, `paper-table1`) or by path to a YAML file."""
     path = Path(name_or_path)
@@ -108,8 +127,10 @@ def load_machine(name_or_path: str, overrides: Mapping[str, Any] | None = None) 
         where = str(path)
         try:
             text = path.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise ProfileError(f"{where}: cannot read machine profile ({exc.strerror})") from None
+        except (OSError, UnicodeDecodeError) as exc:
+            reason = exc.strerror if isinstance(exc, OSError) else "not UTF-8 text"
+            raise ProfileError(f"cannot read machine profile ({reason})",
+                               Location(where)) from None
     else:
         if name_or_path not in builtin_profiles():
             raise ProfileError(f"unknown machine '{name_or_path}': give a YAML file or one of "
@@ -118,8 +139,9 @@ def load_machine(name_or_path: str, overrides: Mapping[str, Any] | None = None) 
         text = (resources.files("nurbsfeed.configs") / where).read_text(encoding="utf-8")
     try:
         data = yaml.safe_load(text)
+        places = _key_places(text, where)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         loc = Location(where, mark.line + 1, mark.column + 1) if mark else Location(where)
         raise ProfileError(f"not valid YAML ({getattr(exc, 'problem', exc)})", loc) from None
-    return machine_from_mapping(data, where, overrides)
+    return machine_from_mapping(data, where, places, overrides)

@@ -174,14 +174,21 @@ def convert_file(source: Path, target: Path | None, machine: Machine, method: st
     text = read_text(source)
     report = FileReport(str(source))
     items = read_program(source, text, dialect, machine.decimals)
-    with atomic_output(target) as out, contextlib.ExitStack() as stack:
-        trace = stack.enter_context(atomic_output(trace_path)) if trace_path else None
-        if trace is not None:
-            trace.write(TRACE_HEADER.encode("ascii"))
-        convert_stream(items, out, machine, method, report, trace, on_curve)
-        if target is None and stdout is not None:
-            out.flush()
-            out.seek(0)
-            while chunk := out.read(1 << 20):
-                stdout.write(chunk)
+    writing = target
+    try:
+        with atomic_output(target) as out, contextlib.ExitStack() as stack:
+            writing = trace_path
+            trace = stack.enter_context(atomic_output(trace_path)) if trace_path else None
+            writing = target
+            if trace is not None:
+                trace.write(TRACE_HEADER.encode("ascii"))
+            convert_stream(items, out, machine, method, report, trace, on_curve)
+            if target is None and stdout is not None:
+                out.flush()
+                out.seek(0)
+                while chunk := out.read(1 << 20):
+                    stdout.write(chunk)
+    except OSError as exc:
+        raise InputError(f"cannot write output ({exc.strerror or exc})",
+                         Location(str(writing or "-"))) from None
     return report

@@ -21,7 +21,8 @@ block arrives; the message names the alarm a controller would raise.
   control point's value; on the first block they hold the current position.
 - The first control point must be the current position (PS1009; Mitsubishi: "command so that it
   matches the end point of the previous block"), to half a unit in the last decimal of the
-  coarser of the two written values (modal.tolerance). Where the current position is unknown
+  coarser of the two written values, and never closer than the controller's own resolution
+  (modal.tolerance). Where the current position is unknown
   (modal.py lists what loses it), a programmed axis is taken as the start and not checked; an
   omitted axis is an error, since its value is needed.
 - G91: each control point is relative to the previous one, the first relative to the current
@@ -45,8 +46,8 @@ from __future__ import annotations
 from nurbsfeed.errors import CurveError, InputError
 from nurbsfeed.gcode.modal import AXES, G6_2, AxisPos, ModalState, tolerance
 from nurbsfeed.gcode.nurbs_block import (FeedChange, FinishedCurve, build_curve, check_block,
-                                         check_no_assignments, curve_name, feed_steps,
-                                         motion_words, point_text)
+                                         check_no_assignments, count, curve_name,
+                                         feed_steps, motion_words, point_text)
 from nurbsfeed.gcode.tokenizer import Block, Word
 
 DEFAULT_ORDER = 4
@@ -119,7 +120,8 @@ class NurbsCurveReader:
         axes = [word for word in block.words if word.letter in AXES]
         knot = block.first("K")
         if self.n_closing and knot is None:
-            raise InputError(self._ended_early(block.words[0]), state.where(block.words[0]))
+            word = next(word for word in block.words if word.letter != "N")
+            raise InputError(self._ended_early(word), state.where(word))
         if self.n_closing and axes:
             raise InputError(f"control point after the knot-only blocks: all control points of a "
                              f"curve come before its {self.order} closing K blocks",
@@ -189,7 +191,7 @@ class NurbsCurveReader:
         value = current.value + word.value if state.incremental else word.value  # type: ignore
         self.decimals[axis] = word.decimals
         if current.value is not None:
-            tol = tolerance(current.decimals, word.decimals)
+            tol = tolerance(state.units, current.decimals, word.decimals)
             if abs(value - current.value) > tol:
                 raise InputError(f"first control point {point_text(axis, value)} is not the "
                                  f"current position {point_text(axis, current.value)} (tolerance "
@@ -227,8 +229,8 @@ class NurbsCurveReader:
     def _closing_knot(self, word: Word) -> bool:
         state = self.state
         if not self.n_closing and len(self.points) < self.order:
-            raise CurveError(f"{len(self.points)} control points are fewer than the order "
-                             f"{self.order}: a curve of order {self.order} needs at least "
+            raise CurveError(f"{count(len(self.points), 'control point')} fewer than the "
+                             f"order {self.order}: a curve of order {self.order} needs at least "
                              f"{self.order}", state.where(word))
         if self.n_closing and word.value > self.knots[-1]:
             first = self.knot_words[-self.n_closing]

@@ -33,8 +33,8 @@ from __future__ import annotations
 from nurbsfeed.errors import CurveError, InputError
 from nurbsfeed.gcode.modal import AXES, G5_2, G5_3, PLANES, AxisPos, ModalState
 from nurbsfeed.gcode.nurbs_block import (FinishedCurve, build_curve, check_block,
-                                         check_no_assignments, curve_name, feed_steps,
-                                         motion_words)
+                                         check_no_assignments, count, curve_name,
+                                         feed_steps, motion_words)
 from nurbsfeed.gcode.tokenizer import Block, Word, code_name
 
 DEFAULT_ORDER = 3
@@ -89,8 +89,8 @@ class G52BlockReader:
         if feed is not None:
             self.state.apply_feed(feed)
         if len(self.points) < self.order:
-            raise CurveError(f"{len(self.points)} control points (counting the start point) are "
-                             f"fewer than the order L{self.order}: LinuxCNC needs at least "
+            raise CurveError(f"{count(len(self.points), 'control point')} fewer than the order "
+                             f"L{self.order}, counting the start point: LinuxCNC needs at least "
                              f"{self.order}", self.state.where(closing))
         return True
 

@@ -35,6 +35,7 @@ from nurbsfeed.gcode.tokenizer import Block, Word, code_name
 
 AXES = ("X", "Y", "Z")
 MM_PER_INCH = 25.4
+INPUT_INCREMENT = {"mm": 0.001, "in": 0.0001}  # IS-B least input increment
 
 # G and M codes in tenths (tokenizer.Word.code).
 G5_2, G5_3, G6_2 = 52, 53, 62
@@ -102,15 +103,18 @@ def coarser_decimals(*decimals: int | None) -> int | None:
     return min(known) if known else None
 
 
-def tolerance(*decimals: int | None) -> float:
-    """Half a unit in the last decimal of the coarser written value (0.5 if neither has any).
+def tolerance(units: str, *decimals: int | None) -> float:
+    """When two written coordinates are the same point: the larger of
 
-    Posts trim trailing zeros ("X10." for 10.000), so a value without fractional digits carries
-    no precision information; two values written to different precisions (a G0 to 3 decimals, a
-    control point to 4) are the same point when they agree to the coarser one.
+    - half a unit in the last decimal of the coarser written value (0.5 if neither has any).
+      Posts trim trailing zeros ("X10." for 10.000), so a value without fractional digits
+      carries no precision information; two values written to different precisions (a G0 to 3
+      decimals, a control point to 4) are the same point when they agree to the coarser one;
+    - half the least input increment of the usual IS-B setting (0.001 mm, 0.0001 inch), the
+      resolution at which the controller itself compares them.
     """
     digits = coarser_decimals(*decimals)
-    return 0.5 * 10.0 ** -(digits or 0)
+    return max(0.5 * 10.0 ** -(digits or 0), 0.5 * INPUT_INCREMENT[units])
 
 
 def format_value(value: float) -> str:

@@ -117,5 +117,10 @@ def build_curve(degree: int, knots: list[float], points: list[tuple[float, float
         raise exc.at(start) from None
 
 
+def count(n: int, noun: str) -> str:
+    """ "1 control point is", "3 control points are" """
+    return f"{n} {noun} is" if n == 1 else f"{n} {noun}s are"
+
+
 def point_text(axis: str, value: float) -> str:
     return f"{axis}{format_value(value)}"

@@ -1,0 +1,244 @@
+"""The command line as a user meets it: outputs, golden files, exact messages and exit codes."""
+
+from __future__ import annotations
+
+import csv
+import difflib
+import io
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from nurbsfeed.cli import main
+from tests.conftest import ROOT, SAMPLES, load_curve
+from tests.gcode_parse import moves
+
+GOLDEN = ROOT / "tests" / "golden"
+
+
+def run(*args: str) -> tuple[int, str, str]:
+    result = CliRunner().invoke(main, list(args), catch_exceptions=False)
+    return result.exit_code, result.stdout, result.stderr
+
+
+def test_convert_json_writes_a_complete_program_with_trace(tmp_path: Path) -> None:
+    out, trace = tmp_path / "q.nc", tmp_path / "q.csv"
+    code, stdout, stderr = run("convert", str(SAMPLES / "quarter-circle.json"), "-o", str(out),
+                               "--machine", "paper-table1", "--trace", str(trace))
+    assert code == 0 and stdout == ""
+    assert "1 curves" in stderr and str(out) in stderr
+    text = out.read_text()
+    lines = text.splitlines()
+    assert lines[1] == "G21 G90" and lines[2] == "G0 X10. Y0. Z0." and lines[-1] == "M2"
+    assert lines[3].startswith("(nurbsfeed: curve 0 quarter-circle-r10, ")
+    rows = list(csv.reader(io.StringIO(trace.read_text())))
+    assert rows[0] == ["curve", "k", "t", "u", "s", "v", "a", "j", "x", "y", "z"]
+    table = np.array(rows[1:], dtype=float)
+    assert np.array_equal(table[:, 1], np.arange(len(table)))
+    assert np.allclose(table[:, 2], table[:, 1] * 0.001, rtol=0, atol=1e-15)
+    # trace points on the circle of radius 10, G-code points = trace points rounded
+    assert np.allclose(np.hypot(table[:, 8], table[:, 9]), 10.0, atol=1e-9)
+    written, feeds, _ = moves(text, [10.0, 0.0, 0.0])
+    rounded = np.round(table[1:, 8:11], 4)
+    keep = np.any(np.diff(np.round(table[:, 8:11], 4), axis=0) != 0, axis=1)
+    assert np.allclose(written, rounded[keep], atol=1e-9)
+    # the programmed F3000 caps the planned speed at 50 mm/s; F words come from the written
+    # (rounded) coordinates, each end within sqrt(3)/2 * 1e-4 mm of the true point
+    assert table[:, 5].max() <= 50.0 * (1 + 1e-9)
+    assert feeds.max() <= 60 * (50.0 * 0.001 + np.sqrt(3) * 1e-4) / 0.001
+
+
+def test_golden_output(request: pytest.FixtureRequest, tmp_path: Path) -> None:
+    """The converted sample, byte for byte. Regenerate with `pytest --update-golden` after a
+    deliberate change, and read the diff; the invariants below hold for the golden file itself."""
+    golden = GOLDEN / "quarter-circle.nc"
+    out = tmp_path / "q.nc"
+    assert run("convert", str(SAMPLES / "quarter-circle.json"), "-m", "paper-table1", "-o",
+               str(out), "-q")[0] == 0
+    produced = out.read_text()
+    if request.config.getoption("--update-golden"):
+        golden.write_text(produced)
+    expected = golden.read_text()
+    diff = "".join(difflib.unified_diff(expected.splitlines(True), produced.splitlines(True),
+                                        "golden", "produced", n=1))
+    assert produced == expected, diff[:4000]
+    written, feeds, _ = moves(expected, [10.0, 0.0, 0.0])
+    assert np.allclose(np.hypot(written[:, 0], written[:, 1]), 10.0, atol=1e-4)
+    assert np.array_equal(written[-1], [0.0, 10.0, 0.0])
+    step = np.linalg.norm(np.diff(np.vstack([[10.0, 0, 0], written]), axis=0), axis=1)
+    periods = step / (feeds / 60.0) / 0.001
+    assert np.allclose(periods, np.round(periods), rtol=5e-3) and np.all(np.round(periods) >= 1)
+
+
+def test_convert_to_stdout_and_exactly_the_same_bytes_as_to_a_file(tmp_path: Path) -> None:
+    code, stdout, _ = run("convert", str(SAMPLES / "quarter-circle.json"), "-m", "paper-table1")
+    out = tmp_path / "q.nc"
+    run("convert", str(SAMPLES / "quarter-circle.json"), "-m", "paper-table1", "-o", str(out))
+    assert code == 0 and stdout == out.read_text()
+
+
+def test_options_override_single_profile_values(tmp_path: Path) -> None:
+    out = tmp_path / "q.nc"
+    code, _, stderr = run("convert", str(SAMPLES / "quarter-circle.json"), "-m", "paper-table1",
+                          "--max-feed-mm-s", "20", "--decimals", "3", "-o", str(out))
+    assert code == 0
+    written, feeds, raw = moves(out.read_text(), [10.0, 0.0, 0.0])
+    assert feeds.max() <= 60 * (20 * 0.001 + np.sqrt(3) * 1e-3) / 0.001  # 3 decimals
+    assert all(len(w.split(".")[-1]) <= 3 for line in raw for w in line.split() if w[0] in "XY")
+
+
+def test_plan_reports_key_points_segments_and_the_bound() -> None:
+    code, stdout, _ = run("plan", str(SAMPLES / "butterfly.json"), "-m", "paper-table1")
+    assert code == 0
+    assert "kappa0 0.1 1/mm; 25 curvature peaks >= kappa0" in stdout
+    assert "time-optimal bound 5.48" in stdout
+    cycle = float(stdout.split("cycle time ")[1].split(" s")[0])
+    assert 5.48 < cycle < 7.0
+
+
+def test_batch_keeps_names_reports_each_file_and_fails_on_one_bad_file(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"curves": [}')
+    out = tmp_path / "out"
+    code, _, stderr = run("convert", str(SAMPLES / "quarter-circle.json"),
+                          str(SAMPLES / "circle.json"), str(bad), "-o", str(out))
+    assert code == 2
+    assert sorted(p.name for p in out.iterdir()) == ["circle.nc", "quarter-circle.nc"]
+    assert f"FAILED: {bad}:1:13: not valid JSON: Expecting value" in stderr
+    assert "2 of 3 files converted" in stderr
+
+
+def test_parallel_jobs_give_the_same_files(tmp_path: Path) -> None:
+    a, b = tmp_path / "a", tmp_path / "b"
+    inputs = [str(SAMPLES / "quarter-circle.json"), str(SAMPLES / "circle.json")]
+    assert run("convert", *inputs, "-o", str(a), "-q")[0] == 0
+    assert run("convert", *inputs, "-o", str(b), "-q", "--jobs", "2")[0] == 0
+    for name in ("circle.nc", "quarter-circle.nc"):
+        assert (a / name).read_bytes() == (b / name).read_bytes()
+
+
+BAD_JSON = [
+    ('{"curves": [', "1:13: not valid JSON: Expecting value"),
+    ('[1, 2]', "1:1: expected a JSON object with 'curves' (or a single curve object)"),
+    ('{"units": "cm", "curves": []}', "1:2: 'units' must be \"mm\" or \"in\", not 'cm'"),
+    ('{"curves": []}', "1:2: 'curves' must be a non-empty list of curve objects"),
+    ('{"degree": 2, "knots": [0,0,0,1,1,1], "control_points": [[0,0],[1,1],[2,0]],\n'
+     ' "weights": [1, 0, 1]}',
+     "2:2: curves[0]: weight 1 must be positive and finite, not 0.0"),
+    ('{"degree": 2, "knots": [0,0,0,1,1], "control_points": [[0,0],[1,1],[2,0]]}',
+     "1:15: curves[0]: 3 control points of degree 2 need 6 knots (control points + order), "
+     "got 5"),
+    ('{"degree": 2, "control_points": [[0,0],[1,1],[2,0]]}', "1:2: curves[0]: missing 'knots'"),
+    ('{"degree": 1, "knots": [0,0,1,1], "control_points": [[0,0],[1,1]], "feed": -5}',
+     "1:68: curves[0]: 'feed' must be a positive number (length/min), not -5"),
+    ('{"degree": 1, "knots": [0,0,1,1], "control_points": [[0,0],[1,1]], "speed": 5}',
+     "1:68: curves[0]: unknown key 'speed' (known: control_points, degree, feed, knots, name, "
+     "weights)"),
+    ('{"degree": 1, "knots": [0,0,1,1], "control_points": [[0,0],[1,NaN]]}',
+     "1:63: not valid JSON: NaN is not a number JSON allows"),
+]
+
+
+@pytest.mark.parametrize(("content", "message"), BAD_JSON)
+def test_bad_json_gives_file_line_col_exit_2_and_no_output(tmp_path: Path, content: str,
+                                                           message: str) -> None:
+    src = tmp_path / "in.json"
+    src.write_text(content)
+    out = tmp_path / "out.nc"
+    code, stdout, stderr = run("convert", str(src), "-o", str(out))
+    assert code == 2
+    assert stderr == f"{src}:{message}\n"
+    assert not out.exists() and os.listdir(tmp_path) == ["in.json"]
+
+
+BAD_PROFILES = [
+    ("period_s: 0.001\n", "{p}: missing key 'max_feed_mm_s'"),
+    ("- 1\n- 2\n", "{p}: a machine profile is a mapping of keys to values, not list"),
+    ("period_s: [1\n", "{p}:2:1: not valid YAML (expected ',' or ']', but got '<stream end>')"),
+    ("{base}\nspeed: 3\n", "{p}:10:1: unknown key 'speed' (known keys: chord_error_mm, decimals, "
+     "feed_decimals, max_acc_mm_s2, max_feed_mm_s, max_jerk_mm_s3, max_normal_acc_mm_s2, "
+     "max_normal_jerk_mm_s3, period_s)"),
+    ("{base}\nchord_error_mm: .nan\n", "{p}:10:1: 'chord_error_mm' must be positive and finite, "
+     "not nan"),
+    ("{base}\nmax_acc_mm_s2: fast\n", "{p}:10:1: 'max_acc_mm_s2' must be a number, not 'fast'"),
+    ("{base}\ndecimals: 2.5\n", "{p}:10:1: 'decimals' must be a whole number from 0 to 8, "
+     "not 2.5"),
+]
+
+
+@pytest.mark.parametrize(("content", "message"), BAD_PROFILES)
+def test_bad_machine_profile_names_file_key_and_value(tmp_path: Path, content: str,
+                                                      message: str) -> None:
+    base = "\n".join(line for line in (ROOT / "configs" / "paper-table1.yaml").read_text()
+                     .splitlines() if line and not line.startswith("#"))
+    base_lines = base.splitlines()
+    profile = tmp_path / "m.yaml"
+    if "{base}" in content:
+        key = content.split("\n")[1].split(":")[0]
+        base = "\n".join(line for line in base_lines if not line.startswith(key + ":"))
+    profile.write_text(content.replace("{base}", base))
+    out = tmp_path / "out.nc"
+    code, _, stderr = run("convert", str(SAMPLES / "quarter-circle.json"), "-m", str(profile),
+                          "-o", str(out))
+    assert code == 2
+    line_no = len(base.splitlines()) + 1
+    assert stderr == message.format(p=profile).replace(":10:", f":{line_no}:") + "\n"
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--machine", "nosuch"], "unknown machine 'nosuch': give a YAML file or one of default, "
+                              "paper-table1"),
+    (["--period-s", "0"], "option --period-s: 'period_s' must be positive and finite, not 0.0"),
+    (["--decimals", "12"], "option --decimals: 'decimals' must be a whole number from 0 to 8, "
+                           "not 12"),
+])
+def test_bad_options_exit_2_with_a_message(args, message) -> None:
+    code, stdout, stderr = run("convert", str(SAMPLES / "quarter-circle.json"), *args)
+    assert (code, stdout, stderr) == (2, "", message + "\n")
+
+
+def test_missing_input_and_unwritable_output(tmp_path: Path) -> None:
+    code, _, stderr = run("convert", str(tmp_path / "nope.nc"))
+    assert (code, stderr) == (2, f"{tmp_path / 'nope.nc'}: cannot read input (No such file or "
+                                 "directory)\n")
+    target = tmp_path / "missing-dir" / "x.nc"
+    code, _, stderr = run("convert", str(SAMPLES / "quarter-circle.json"), "-o", str(target))
+    assert (code, stderr) == (2, f"{target}: cannot write output (No such file or directory)\n")
+
+
+def test_usage_errors_exit_2() -> None:
+    code, _, stderr = run("convert", str(SAMPLES / "quarter-circle.json"),
+                          str(SAMPLES / "circle.json"))
+    assert code == 2 and "several inputs need -o DIR" in stderr
+    code, _, stderr = run("convert", str(SAMPLES / "circle.json"), "--method", "rk9")
+    assert code == 2 and "'rk9' is not one of 'taylor1', 'rk4', 'rk2c'" in stderr
+
+
+def test_zero_length_curve_writes_no_move_and_says_so(tmp_path: Path) -> None:
+    src = tmp_path / "dot.json"
+    src.write_text('{"degree": 1, "knots": [0,0,1,1], "control_points": [[3,4],[3,4]]}')
+    code, stdout, _ = run("convert", str(src))
+    assert code == 0
+    assert "(nurbsfeed: zero-length curve, no move written)" in stdout
+    assert "G1" not in stdout
+
+
+def test_jit_and_plain_python_kernels_write_identical_programs(tmp_path: Path) -> None:
+    """One code path: the numba-compiled kernels and the same functions run as plain Python
+    produce the same output to the last written digit (and the same trace)."""
+    outputs = []
+    for flag in ("0", "1"):
+        out, trace = tmp_path / f"q{flag}.nc", tmp_path / f"q{flag}.csv"
+        env = dict(os.environ, NURBSFEED_NO_JIT=flag)
+        subprocess.run([sys.executable, "-m", "nurbsfeed.cli", "convert",
+                        str(SAMPLES / "quarter-circle.json"), "-m", "paper-table1", "-o",
+                        str(out), "--trace", str(trace), "-q"], env=env, check=True)
+        outputs.append((out.read_bytes(), np.loadtxt(trace, delimiter=",", skiprows=1)))
+    assert outputs[0][0] == outputs[1][0]
+    assert np.allclose(outputs[0][1], outputs[1][1], rtol=1e-12, atol=1e-12)

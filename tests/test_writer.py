@@ -1,0 +1,97 @@
+"""G1 output rules (SPEC §5): decimal points, no -0., no zero moves, F from written coordinates."""
+
+from __future__ import annotations
+
+import io
+import re
+
+import numpy as np
+import pytest
+
+from nurbsfeed.gcode.writer import MoveWriter, format_number, round_ticks
+from tests.gcode_parse import moves
+
+
+@pytest.mark.parametrize(("value", "decimals", "text"), [
+    (50.0, 4, "50."), (0.0, 4, "0."), (12.34, 4, "12.34"), (-3.5, 4, "-3.5"),
+    (0.0001, 4, "0.0001"), (-0.00004, 4, "0."), (-0.00005, 4, "-0.0001"), (0.00005, 4, "0.0001"),
+    (123456.78915, 4, "123456.7892"), (-0.1, 1, "-0.1"), (7.0, 0, "7."), (1e-9, 4, "0."),
+    (99.99995, 4, "100."), (2.5, 5, "2.5"),
+])
+def test_number_format_always_has_a_point_and_never_a_negative_zero(value, decimals,
+                                                                   text) -> None:
+    assert format_number(value, decimals) == text
+
+
+def write(points: np.ndarray, decimals: int = 4, period_s: float = 0.001,
+          eol: str = "\n") -> tuple[str, MoveWriter]:
+    out = io.BytesIO()
+    writer = MoveWriter(out, decimals, 3, period_s, eol, points[0])
+    writer.write(points[1:])
+    return out.getvalue().decode("ascii"), writer
+
+
+def slow_start_path(n: int = 3000) -> np.ndarray:
+    """A path that starts and ends at rest: sub-resolution steps at both ends, 3-D."""
+    t = np.linspace(0.0, 1.0, n)
+    s = 3 * t**2 - 2 * t**3  # smoothstep: zero speed at both ends
+    return np.column_stack([20 * s - 5, 7 * np.sin(3 * s), -0.3 * s])
+
+
+def test_every_move_lasts_its_periods_according_to_its_written_coordinates() -> None:
+    pts = slow_start_path()
+    text, writer = write(pts)
+    written, feeds, raw = moves(text, round_ticks(pts[:1], 4)[0] / 1e4)
+    # recover n for every move: the index of each written point among the rounded inputs
+    ticks = round_ticks(pts, 4)
+    keep = np.flatnonzero(np.any(np.diff(ticks, axis=0) != 0, axis=1)) + 1
+    periods = np.diff(np.concatenate([[0], keep]))
+    assert len(written) == len(keep) == writer.moves
+    step = np.linalg.norm(np.diff(np.vstack([ticks[:1] / 1e4, written]), axis=0), axis=1)
+    duration = step / (feeds / 60.0)
+    assert np.allclose(duration, periods * 0.001, rtol=5e-4)
+    assert periods.max() > 1 and np.median(periods) == 1  # merged only near standstill
+    assert np.allclose(written, ticks[keep] / 1e4, atol=1e-12)
+    assert np.allclose(written[-1], pts[-1], atol=0.5e-4)
+
+
+def test_no_zero_length_move_no_f0_no_negative_zero_and_a_point_on_every_number() -> None:
+    text, _ = write(slow_start_path())
+    written, feeds, raw = moves(text, slow_start_path()[0])
+    assert np.all(np.linalg.norm(np.diff(written, axis=0), axis=1) > 0)
+    assert np.all(feeds > 0)
+    numbers = re.findall(r"[XYZF](-?[\d.]+)", text)
+    assert numbers and all("." in n for n in numbers)
+    assert not re.search(r"-0\.0*(\s|$)", text)
+    assert not re.search(r"F0?\.0*(\s|$)", text)
+    assert raw[0].startswith("G1 ") and not any(r.startswith("G1") for r in raw[1:])
+
+
+def test_modal_words_are_not_repeated() -> None:
+    pts = np.column_stack([np.arange(5.0), np.zeros(5), np.full(5, 2.0)])
+    text, _ = write(pts)
+    assert text.splitlines() == ["G1 X1. F60000.", "X2.", "X3.", "X4."]
+
+
+def test_line_endings_follow_the_program() -> None:
+    pts = np.column_stack([np.arange(3.0), np.zeros(3), np.zeros(3)])
+    text, _ = write(pts, eol="\r\n")
+    assert text == "G1 X1. F60000.\r\nX2.\r\n"
+
+
+def test_tiny_feeds_keep_five_significant_digits() -> None:
+    # 0.0001 mm over 7 periods of 1 ms: F = 60 * 0.0001 / 0.007 = 0.857142857... mm/min
+    pts = np.zeros((8, 3))
+    pts[7, 0] = 0.0001
+    text, _ = write(pts)
+    assert text == "G1 X0.0001 F0.85714\n"
+
+
+def test_chunked_writing_equals_one_shot_writing() -> None:
+    pts = slow_start_path(200_000)
+    whole, _ = write(pts)
+    out = io.BytesIO()
+    writer = MoveWriter(out, 4, 3, 0.001, "\n", pts[0])
+    for lo in range(1, len(pts), 7919):
+        writer.write(pts[lo:lo + 7919])
+    assert out.getvalue().decode() == whole
