@@ -213,7 +213,7 @@ class _Stretch:
 
 
 def _step_stretch(curve, code: int, u_start: float, u_end: float, end_point: np.ndarray,
-                  ds: np.ndarray, slow: float) -> _Stretch:
+                  ds: np.ndarray, slow: float, sigma_guess: float) -> _Stretch:
     """Step from u_start through ds (N,) and land exactly on end_point.
 
     The kernel makes the first N-1 steps with targets sigma * ds; the last point is end_point
@@ -238,9 +238,10 @@ def _step_stretch(curve, code: int, u_start: float, u_end: float, end_point: np.
         gap = float(np.linalg.norm(end_point - pts[-2]))
         return (gap if u[-2] <= u_end else -gap) - sigma * float(ds[-1])
 
-    sigma_prev, r_prev = 1.0, run(1.0)
-    best = (abs(r_prev), 1.0)
-    sigma, runs, seconds = 1.0 + r_prev / total, 1, 0.0
+    # d(residual)/d(sigma) ~ -total: a Newton step from the guess, then secant steps
+    sigma_prev, r_prev = sigma_guess, run(sigma_guess)
+    best = (abs(r_prev), sigma_guess)
+    sigma, runs, seconds = sigma_guess + r_prev / total, 1, 0.0
     while abs(r_prev) > tol:
         start = time.perf_counter()
         r = run(sigma)
@@ -258,6 +259,19 @@ def _step_stretch(curve, code: int, u_start: float, u_end: float, end_point: np.
     u[-1] = u_end
     pts[-1] = end_point
     return _Stretch(u, pts, sigma * ds, sigma, runs, seconds)
+
+
+def _sigma_guess(plan: Plan, method: str, t_plan: np.ndarray, ds: np.ndarray) -> float:
+    """Where the landing search starts. rk2c steps chords of length ds, so it runs ahead of the
+    arc by sum(kappa^2 ds^3 / 24) (arc minus chord of a circular arc); rk4 follows the arc itself
+    and taylor1's drift has no cheap estimate, so both start from 1."""
+    if method != "rk2c":
+        return 1.0
+    s_mid = plan.law.at(0.5 * (t_plan[:-1] + t_plan[1:]))[0]
+    kappa = np.interp(s_mid, plan.grid.s_mm, plan.grid.kappa_1_mm)
+    total = float(ds.sum())
+    ahead = float(np.sum(np.minimum(kappa * ds, 2.0) ** 2 * ds)) / 24.0
+    return 1.0 - ahead / total if total > 0.0 else 1.0
 
 
 def interpolate(plan: Plan, method: str = "rk2c") -> Interpolation:
@@ -285,7 +299,8 @@ def interpolate(plan: Plan, method: str = "rk2c") -> Interpolation:
         last = p == len(plan.piece_periods) - 1
         end_point = curve.points[-1] if last else curve.point(key_u[k1])
         stretch = _step_stretch(curve, code, float(key_u[k0]), float(key_u[k1]),
-                                np.asarray(end_point, dtype=float), ds, slow)
+                                np.asarray(end_point, dtype=float), ds, slow,
+                                _sigma_guess(plan, method, t_plan, ds))
         runs += stretch.runs
         seconds += stretch.seconds
         scale = float(plan.piece_scale[p])

@@ -7,8 +7,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from nurbsfeed.planning.scurve import (peak_speeds, reachable_speed, transition_distance_mm,
-                                       transition_phases, transition_time_s)
+from nurbsfeed.planning.scurve import (peak_speed, reachable_speed, scan_speeds,
+                                       transition_distance_mm, transition_phases,
+                                       transition_time_s)
 from nurbsfeed.planning.timelaw import TimeLaw
 
 speeds = st.floats(0.0, 500.0)
@@ -34,7 +35,9 @@ def integrate(v0: float, phases: list[tuple[float, float]]) -> tuple[float, floa
 @given(speeds, speeds, accs, jerks)
 def test_transition_reaches_its_speed_within_limits_and_its_distance_is_the_mean(v0, v1, acc,
                                                                                 jerk) -> None:
-    phases = transition_phases(v0, v1, acc, jerk)
+    durations, jerks = np.empty(3), np.empty(3)
+    n = transition_phases(v0, v1, acc, jerk, durations, jerks)
+    phases = list(zip(durations[:n], jerks[:n]))
     s, v, a, amax, t = integrate(v0, phases)
     scale = max(v0, v1, 1.0)
     assert v == pytest.approx(v1, abs=1e-9 * scale)
@@ -73,8 +76,7 @@ def test_peak_speed_fits_the_segment_and_cannot_be_raised(va, vb, length, acc, j
     need = float(transition_distance_mm(va, vb, acc, jerk))
     length = max(length, need)  # the scan guarantees the ends are reachable
     cap = max(va, vb) + cap_extra
-    vp = float(peak_speeds(np.array([va]), np.array([vb]), np.array([length]), np.array([cap]),
-                           acc, jerk)[0])
+    vp = peak_speed(va, vb, length, cap, acc, jerk)
     used = float(transition_distance_mm(va, vp, acc, jerk) + transition_distance_mm(vp, vb,
                                                                                    acc, jerk))
     assert max(va, vb) <= vp <= cap
@@ -90,17 +92,14 @@ def test_time_law_is_continuous_and_respects_the_tangential_limits() -> None:
     acc, jerk = 1000.0, 1e4
     s_key = np.concatenate([[0.0], np.cumsum(rng.uniform(0.5, 40.0, 12))])
     v_key = np.concatenate([[0.0], rng.uniform(5, 90, 11), [0.0]])
-    # make the ends reachable the way the scan would
-    for _ in range(2):
-        for i in range(len(v_key) - 1):
-            v_key[i + 1] = min(v_key[i + 1], reachable_speed(v_key[i], s_key[i + 1] - s_key[i],
-                                                             acc, jerk, v_key[i + 1]))
-        for i in range(len(v_key) - 2, -1, -1):
-            v_key[i] = min(v_key[i], reachable_speed(v_key[i + 1], s_key[i + 1] - s_key[i],
-                                                     acc, jerk, v_key[i]))
     length = np.diff(s_key)
+    cap = np.full(len(length), 100.0)
+    v_key = scan_speeds(v_key, length, cap, acc, jerk)
+    for i in range(len(length)):  # the scan's guarantee: every segment's ends are reachable
+        assert transition_distance_mm(v_key[i], v_key[i + 1], acc, jerk) <= length[i]
     holds = np.zeros(len(length))
-    peak = peak_speeds(v_key[:-1], v_key[1:], length, np.full(len(length), 100.0), acc, jerk)
+    peak = np.array([peak_speed(v_key[i], v_key[i + 1], length[i], 100.0, acc, jerk)
+                     for i in range(len(length))])
     law = TimeLaw.from_segments(s_key, v_key, peak, holds, holds, acc, jerk)
     t = np.linspace(0.0, law.duration_s, 20001)
     s, v, a, j = law.at(t)

@@ -45,9 +45,19 @@ from __future__ import annotations
 
 from nurbsfeed.errors import CurveError, InputError
 from nurbsfeed.gcode.modal import AXES, G6_2, AxisPos, ModalState, tolerance
-from nurbsfeed.gcode.nurbs_block import (FeedChange, FinishedCurve, build_curve, check_block,
-                                         check_no_assignments, count, curve_name,
-                                         feed_steps, motion_words, point_text)
+from nurbsfeed.gcode.nurbs_block import (
+    FeedChange,
+    FinishedCurve,
+    build_curve,
+    check_block,
+    check_no_assignments,
+    count,
+    curve_name,
+    feed_steps,
+    first_word,
+    motion_words,
+    point_text,
+)
 from nurbsfeed.gcode.tokenizer import Block, Word
 
 DEFAULT_ORDER = 4
@@ -120,7 +130,7 @@ class NurbsCurveReader:
         axes = [word for word in block.words if word.letter in AXES]
         knot = block.first("K")
         if self.n_closing and knot is None:
-            word = next(word for word in block.words if word.letter != "N")
+            word = first_word(block)
             raise InputError(self._ended_early(word), state.where(word))
         if self.n_closing and axes:
             raise InputError(f"control point after the knot-only blocks: all control points of a "
@@ -133,10 +143,6 @@ class NurbsCurveReader:
             return self._closing_knot(knot)
         check_block(block, state, "NKXYZRF" + ("G" if self.linuxcnc else ""), {G6_2},
                     f"a {self.label} control-point block (K X Y Z R F)")
-        if knot is None:
-            raise InputError(f"control point without a knot: every control-point block of a "
-                             f"{self.label} curve carries K (Fanuc alarm PS1002)",
-                             state.where(axes[0] if axes else block.words[0]))
         self._control_point(block)
         return False
 
@@ -155,19 +161,21 @@ class NurbsCurveReader:
         state = self.state
         knot = block.first("K")
         if knot is None:
+            word = next((word for word in block.words if word.letter in AXES + ("R", "F")),
+                        first_word(block))
             raise InputError(f"control point without a knot: every control-point block of a "
-                             f"{self.label} curve carries K (Fanuc alarm PS1002)", self.location)
-        self._knot(knot)
+                             f"{self.label} curve carries K (Fanuc alarm PS1002)",
+                             state.where(word))
+        self._knot(knot, closing=False)
         weight = block.first("R")
         if weight is not None and weight.value <= 0:
             raise CurveError(f"{weight.name}: a weight R must be positive", state.where(weight))
-        point = tuple(self._coordinate(axis, block.first(axis)) for axis in AXES)
+        x, y, z = (self._coordinate(axis, block.first(axis)) for axis in AXES)
         feed = block.first("F")
         if feed is not None:
-            state.apply_feed(feed)
-            self.feed = state.feed
+            self.feed = state.apply_feed(feed)
             self.changes.append(FeedChange(knot.value, self.feed, feed))
-        self.points.append(point)  # type: ignore[arg-type]
+        self.points.append((x, y, z))
         self.weights.append(1.0 if weight is None else weight.value)
 
     def _coordinate(self, axis: str, word: Word | None) -> float:
@@ -180,15 +188,13 @@ class NurbsCurveReader:
             self.decimals[axis] = word.decimals
             return previous + word.value if state.incremental else word.value
         current = state.pos[axis]
-        if word is None or state.incremental:
-            current = state.known(axis, word or self.start,
-                                  "a G91 first control point is relative to it" if word else
-                                  f"program {axis} in the curve's first block (omitted axes keep "
-                                  "the current position)")
         if word is None:
             self.decimals[axis] = current.decimals
-            return current.value  # type: ignore[return-value]
-        value = current.value + word.value if state.incremental else word.value  # type: ignore
+            return state.known(axis, self.start, f"program {axis} in the curve's first block "
+                                                 "(omitted axes keep the current position)")
+        value = word.value
+        if state.incremental:
+            value += state.known(axis, word, "a G91 first control point is relative to it")
         self.decimals[axis] = word.decimals
         if current.value is not None:
             tol = tolerance(state.units, current.decimals, word.decimals)
@@ -199,7 +205,7 @@ class NurbsCurveReader:
                                  "(Fanuc alarm PS1009)", state.where(word))
         return value
 
-    def _knot(self, word: Word) -> None:
+    def _knot(self, word: Word, closing: bool) -> None:
         """Append a knot, checking order, clamped start and repetition as it arrives."""
         state = self.state
         value = word.value
@@ -214,12 +220,12 @@ class NurbsCurveReader:
         if run > self.order:
             raise CurveError(f"{word.name}: knot {value:g} repeated {run} times in a row; at most "
                              f"the order {self.order} (Fanuc alarm PS1008)", state.where(word))
-        if 0 < len(self.knots) < self.order and not self.n_closing and value != self.knots[0]:
+        if not closing and 0 < len(self.knots) < self.order and value != self.knots[0]:
             first = self.knot_words[0]
             raise CurveError(f"{word.name}: the first {self.order} knots must be equal (clamped "
                              f"start, order {self.order}); {first.name} on line {first.line} "
                              "starts the curve (Fanuc alarm PS1007)", state.where(word))
-        if run == self.order and not self.n_closing and value != self.knots[0]:
+        if not closing and run == self.order and value != self.knots[0]:
             raise CurveError(f"{word.name}: interior knot {value:g} repeated {run} times (the "
                              f"order) would split the curve in two; at most {self.order - 1}",
                              state.where(word))
@@ -237,7 +243,7 @@ class NurbsCurveReader:
             raise CurveError(f"{word.name}: the last {self.order} knots must be equal (clamped "
                              f"end, order {self.order}); {first.name} on line {first.line} is the "
                              "first of them (Fanuc alarm PS1007)", state.where(word))
-        self._knot(word)
+        self._knot(word, closing=True)
         self.n_closing += 1
         return self.n_closing == self.order
 

@@ -32,9 +32,16 @@ from __future__ import annotations
 
 from nurbsfeed.errors import CurveError, InputError
 from nurbsfeed.gcode.modal import AXES, G5_2, G5_3, PLANES, AxisPos, ModalState
-from nurbsfeed.gcode.nurbs_block import (FinishedCurve, build_curve, check_block,
-                                         check_no_assignments, count, curve_name,
-                                         feed_steps, motion_words)
+from nurbsfeed.gcode.nurbs_block import (
+    FinishedCurve,
+    build_curve,
+    check_block,
+    check_no_assignments,
+    count,
+    curve_name,
+    feed_steps,
+    motion_words,
+)
 from nurbsfeed.gcode.tokenizer import Block, Word, code_name
 
 DEFAULT_ORDER = 3
@@ -55,6 +62,10 @@ class G52BlockReader:
         self.start = start
         self.location = state.where(start)
         self.name = curve_name(first, start)
+        moves = motion_words(first)
+        if moves:
+            raise InputError(f"{moves[0].name} and G5.2 are both motion codes; one per block",
+                             state.where(moves[0]))
         state.check_nurbs_allowed(start)
         if state.plane not in PLANES:
             raise InputError(f"G5.2 needs plane G17, G18 or G19, not "
@@ -65,14 +76,10 @@ class G52BlockReader:
                                                       "position; move there with G0 or G1 first")
                        for axis in AXES}
         self.points: list[tuple[float, float, float]] = [
-            tuple(self.origin[axis].value for axis in AXES)]  # type: ignore[misc]
+            (self.origin["X"], self.origin["Y"], self.origin["Z"])]
         self.weights = [1.0]
-        self.decimals = {axis: self.origin[axis].decimals for axis in AXES}
+        self.decimals = {axis: state.pos[axis].decimals for axis in AXES}
         self.order = DEFAULT_ORDER
-        moves = motion_words(first)
-        if moves:
-            raise InputError(f"{moves[0].name} and G5.2 are both motion codes; one per block",
-                             state.where(moves[0]))
         self._line(first, opening=True)
 
     def take(self, block: Block) -> bool:
@@ -127,7 +134,7 @@ class G52BlockReader:
             if weight is None:
                 raise CurveError("control point without a weight: LinuxCNC needs a positive P on "
                                  "every G5.2 control point", state.where(given[0]))
-            self._point(dict(zip(self.plane_axes, given)), weight.value)  # type: ignore[arg-type]
+            self._point(dict(zip(self.plane_axes, given, strict=True)), weight.value)
         elif weight is not None:
             if not opening:
                 raise InputError(f"{weight.name} without {first} and {second}: only the G5.2 line "
@@ -138,14 +145,13 @@ class G52BlockReader:
         values = []
         for axis in AXES:
             word = words.get(axis)
-            origin = self.origin[axis]
             if word is None:
-                values.append(origin.value)
+                values.append(self.origin[axis])
                 continue
             self.decimals[axis] = word.decimals
-            values.append(origin.value + word.value if self.state.incremental  # type: ignore
+            values.append(self.origin[axis] + word.value if self.state.incremental
                           else word.value)
-        self.points.append(tuple(values))  # type: ignore[arg-type]
+        self.points.append((values[0], values[1], values[2]))
         self.weights.append(weight)
 
     def unfinished(self) -> InputError:

@@ -21,9 +21,10 @@ here; the message says what made it unknown. The position becomes unknown for:
 - canned cycles G73-G89 (Z: it ends at the R plane or the initial level), axis words with no
   motion mode in effect, and axis words with a G code this reader does not know (named axes).
 
-G92 X.. sets the named axes. A G20/G21 switch converts the known position to the new unit. A
-block delete line (`/`) is treated as executed (switch off): its modal effects apply, and a NURBS
-block containing one is replaced as a whole.
+G92 X.. sets the named axes; the X of a Fanuc dwell "G04 X1.5" is a time, not a position. A
+G20/G21 switch converts the known position to the new unit. A block delete line (`/`) is
+treated as executed (switch off): its modal effects apply, and a NURBS block containing one is
+replaced as a whole.
 """
 
 from __future__ import annotations
@@ -62,11 +63,12 @@ NOT_SUPPORTED = {
     121: "G12.1 (polar coordinate interpolation) is not supported",
     71: "G7.1 (cylindrical interpolation) is not supported",
 }
-NO_POSITION_EFFECT = ({40, 70, 80, 90, 150, 131, 200, 210, 400, 610, 611, 640, 670, 800, 900,
-                       910, 901, 911, 960, 970, 980, 990, G5_2, G5_3, G6_2}
+DWELL = 40  # G4: its X or P word is the dwell time, not a position
+NO_POSITION_EFFECT = ({70, 80, 90, 150, 131, 200, 210, 400, 610, 611, 640, 670, 800, 900, 910,
+                       901, 911, 960, 970, 980, 990}
                       | set(PLANES) | OTHER_PLANES | CUTTER_COMP_ON | set(FEED_MODES))
 KNOWN_G = (GROUP1_MOVES | SPLINES | PROBES | CYCLES | REFERENCE_RETURN | NAMED_AXES_LOST
-           | TOOL_LENGTH | FRAME_SELECT | FRAME_ARGUMENTS | NO_POSITION_EFFECT | {920})
+           | TOOL_LENGTH | FRAME_SELECT | FRAME_ARGUMENTS | NO_POSITION_EFFECT | {920, DWELL})
 
 
 @dataclass(frozen=True)
@@ -154,22 +156,23 @@ class ModalState:
                              f"is in effect since line {self.feed_mode.line} (Fanuc alarm "
                              "PS1006)", self.where(word))
 
-    def known(self, axis: str, word: Word, purpose: str) -> AxisPos:
+    def known(self, axis: str, word: Word, purpose: str) -> float:
         """The current position on `axis`, or an error at `word` saying why it is unknown."""
         current = self.pos[axis]
         if current.value is None:
             raise InputError(f"{axis} is unknown here ({current.lost}): {purpose}",
                              self.where(word))
-        return current
+        return current.value
 
     # ---- executing a block -------------------------------------------------------------------
-    def apply_feed(self, word: Word) -> None:
+    def apply_feed(self, word: Word) -> FeedWord:
         """A new modal F; F must not be negative (F0 is legal on rapid-only programs)."""
         if word.value < 0:
             raise InputError(f"{word.name}: a feed must not be negative", self.where(word))
         text = word.name if not word.text.lstrip("+-").startswith("#") else \
             "F" + format_value(word.value)
         self.feed = FeedWord(word.value, text)
+        return self.feed
 
     def apply(self, block: Block) -> None:
         """Execute one block that is not part of a NURBS block (parse -> check -> execute)."""
@@ -191,7 +194,7 @@ class ModalState:
         if feed is not None:
             self.apply_feed(feed)
         if units:
-            self._set_units("in" if units[0].code == 200 else "mm", block.line)
+            self._set_units("in" if units[0].code == 200 else "mm")
         if 900 in g:
             self.incremental = False
         if 910 in g:
@@ -217,7 +220,7 @@ class ModalState:
             self.cycle = None
         self._move(block, g, m, axes)
 
-    def _set_units(self, units: str, line: int) -> None:
+    def _set_units(self, units: str) -> None:
         if units == self.units:
             return
         factor = 1.0 / MM_PER_INCH if units == "in" else MM_PER_INCH
@@ -252,7 +255,7 @@ class ModalState:
             self._lose(AXES if everywhere else named, f"after {code_name('G', code)} on line "
                                                       f"{line}")
             return
-        if not axes or g.keys() & FRAME_ARGUMENTS:
+        if not axes or DWELL in g or g.keys() & FRAME_ARGUMENTS:
             return
         unknown = sorted(code for code in g if code not in KNOWN_G)
         if unknown:

@@ -5,14 +5,22 @@ leave behind, and the programmed feed as a step function of u (SPEC §3a).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Iterable
 
 import numpy as np
 
 from nurbsfeed.errors import CurveError, InputError, Location
-from nurbsfeed.gcode.modal import AXES, AxisPos, FeedWord, ModalState
-from nurbsfeed.gcode.modal import GROUP1_MOVES, PROBES, SPLINES, format_value
+from nurbsfeed.gcode.modal import (
+    AXES,
+    GROUP1_MOVES,
+    PROBES,
+    SPLINES,
+    AxisPos,
+    FeedWord,
+    ModalState,
+    format_value,
+)
 from nurbsfeed.gcode.tokenizer import Block, Word
 from nurbsfeed.geometry import NurbsCurve
 
@@ -43,6 +51,11 @@ def curve_name(block: Block, start: Word) -> str:
     """"line 12", or "N120 line 12" when the block has a sequence number."""
     number = block.first("N")
     return (f"N{number.text} " if number else "") + f"line {start.line}"
+
+
+def first_word(block: Block) -> Word:
+    """The first word that is not a sequence number (blocks passed here are not inert)."""
+    return next(word for word in block.words if word.letter != "N")
 
 
 def motion_words(block: Block) -> list[Word]:

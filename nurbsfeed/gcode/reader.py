@@ -11,20 +11,21 @@ blocks and G6.2 curves with LinuxCNC's rules. `auto`: G5.2 is LinuxCNC; G6.2 is 
 first block has a Q word, Fanuc otherwise; a curve that continues a modal G6.2 follows the rules
 of the curve before it.
 
-Only the lines of the NURBS block being read are held (their line ending, in fact); everything
-else streams, so a program of any length is read in constant memory.
+Nothing is held but the modal state, the parameters and the NURBS block being read (its control
+points, not its lines: their line ending is all a CurveBlock keeps), so a program of any length
+is read in constant memory.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 from nurbsfeed.errors import InputError
 from nurbsfeed.gcode.fanuc import NurbsCurveReader
 from nurbsfeed.gcode.linuxcnc import G52BlockReader
-from nurbsfeed.gcode.modal import AXES, G5_2, G5_3, G6_2, ModalState
-from nurbsfeed.gcode.nurbs_block import FinishedCurve, motion_words
+from nurbsfeed.gcode.modal import AXES, G5_2, G5_3, G6_2, NO_POSITION_EFFECT, ModalState
+from nurbsfeed.gcode.nurbs_block import FinishedCurve, first_word, motion_words
 from nurbsfeed.gcode.tokenizer import Block, Param, iter_lines, tokenize_line
 from nurbsfeed.program import CurveBlock, PassThrough, ProgramItem
 
@@ -99,14 +100,17 @@ class _Reader:
         knot = block.first("K")
         axes = [word for word in block.words if word.letter in AXES]
         if knot is not None and axes:
-            start = next(word for word in block.words if word.letter != "N")
+            start = first_word(block)
             self.last_curve = NurbsCurveReader(block, state, start, previous.linuxcnc)
             return self.last_curve
         if knot is not None:
             raise InputError(f"{knot.name}: knot-only block after the curve ended; a curve of "
                              f"order {previous.order} closes with exactly {previous.order} K "
                              "blocks", state.where(knot))
-        if axes:
+        # Axis words without K are a control point missing its knot, unless a G code of the
+        # block gives them another meaning (G28 Z0., G92 X0, G04 X1.5, ...).
+        if axes and all(word.code in NO_POSITION_EFFECT for word in block.words
+                        if word.letter == "G"):
             raise InputError(f"{axes[0].name} in NURBS mode without a knot: a {previous.label} "
                              "control point carries K (Fanuc alarm PS1002); write G1 for a "
                              "straight move", state.where(axes[0]))

@@ -25,18 +25,23 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
-from typing import Iterator, Mapping
 
 from nurbsfeed.errors import InputError, Location
 
-_NUMBER = re.compile(r"[+-]?\s*(?:\d+(?:\.\d*)?|\.\d+)")
-_PARAM_REF = re.compile(r"([+-]?)\s*#\s*(\d+)")
-_ASSIGN = re.compile(r"#\s*(\d+)\s*=")
+_SPACE = "[ \t\r]"  # the spaces between words (a lone CR inside a line is one)
+_NUMBER = re.compile(rf"[+-]?{_SPACE}*(?:\d+(?:\.\d*)?|\.\d+)")
+_PARAM_REF = re.compile(rf"([+-]?){_SPACE}*#{_SPACE}*(\d+)")
+_ASSIGN = re.compile(rf"#{_SPACE}*(\d+){_SPACE}*=")
 _LETTER_RUN = re.compile(r"[A-Za-z]{2,}")
-_FUNCTION = re.compile(r"([A-Za-z]{2,})\s*\[")
+_FUNCTION = re.compile(rf"([A-Za-z]{{2,}}){_SPACE}*\[")
 _EOL = re.compile(r"\r?\n\Z")
 _LINE = re.compile(r"[^\n]*\n|[^\n]+\Z")
+# The fast path: a line of plain words and comments only (no %, /, #, [ or statements).
+_PLAIN_LINE = re.compile(rf"{_SPACE}*(?:(?:[A-Za-z]{_SPACE}*[+-]?{_SPACE}*(?:\d+(?:\.\d*)?|\.\d+)"
+                         rf"|\([^)]*\)){_SPACE}*)*(?:;.*)?")
+_PLAIN_WORD = re.compile(rf"([A-Za-z]){_SPACE}*([+-]?){_SPACE}*(\d+(?:\.\d*)?|\.\d+)|\([^)]*\)|;.*")
 
 # Letter runs that open a macro / O-word statement (Fanuc custom macro B, LinuxCNC O-codes).
 KEYWORDS = frozenset({
@@ -206,16 +211,16 @@ class _Scanner:
             return sign * param.value, f"{ref.group(1)}#{number}", param.decimals
         if self.peek() == "#":
             raise self.error(BAD_PARAMETER)
-        number = _NUMBER.match(self.body, self.pos)
-        if not number:
+        literal = _NUMBER.match(self.body, self.pos)
+        if not literal:
             raise self.error(f"{owner} has no number after it (found {self.snippet()}); write "
                              f"e.g. {owner}10.5", owner_pos)
-        text = re.sub(r"\s", "", number.group())
+        text = re.sub(_SPACE, "", literal.group())
         value = float(text)
         if not math.isfinite(value):
             shown = text if len(text) <= 24 else text[:20] + "..."
             raise self.error(f"{owner}{shown} is too large to be a number", owner_pos)
-        self.pos = number.end()
+        self.pos = literal.end()
         return value, text, _decimals(text)
 
 
@@ -230,6 +235,42 @@ def tokenize_line(line_text: str, line: int, path: str,
     eol_match = _EOL.search(line_text)
     eol = eol_match.group() if eol_match else ""
     body = line_text[:len(line_text) - len(eol)]
+    if _PLAIN_LINE.fullmatch(body):
+        words = _plain_words(body, line)
+        if words is not None:
+            return Block(line, words, eol=eol)
+    return _scan_line(body, eol, line, path, params)
+
+
+def _plain_words(body: str, line: int) -> tuple[Word, ...] | None:
+    """Words of a line of plain words and comments, or None if a value needs a message.
+
+    The fast path for the bulk of a program: one regex pass, no parameters. Any value the
+    scanner would reject (too large, a G/M number with two decimals) returns None, and the
+    scanner then reads the line again and raises its message.
+    """
+    words = []
+    for match in _PLAIN_WORD.finditer(body):
+        letter = match.group(1)
+        if letter is None:
+            continue
+        text = match.group(2) + match.group(3)
+        value = float(text)
+        upper = letter.upper()
+        if not math.isfinite(value) or (upper in "GM" and not _valid_code(value)):
+            return None
+        words.append(Word(upper, value, text, _decimals(text), line, match.start() + 1))
+    return tuple(words)
+
+
+def _valid_code(value: float) -> bool:
+    """G and M numbers: 0 to CODE_LIMIT, at most one decimal."""
+    return 0.0 <= value <= CODE_LIMIT and abs(value * 10 - round(value * 10)) <= 1e-6
+
+
+def _scan_line(body: str, eol: str, line: int, path: str,
+               params: Mapping[int, Param]) -> Block:
+    """The full reader of one line: parameters, block delete, `%`, and every error message."""
     scan = _Scanner(body, line, path, params)
     scan.skip_spaces()
     if scan.peek() == "%":
@@ -268,10 +309,10 @@ def tokenize_line(line_text: str, line: int, path: str,
             letter = char.upper()
             scan.pos += 1
             value, text, decimals = scan.value(letter, start)
-            if letter in "GM":
-                if not 0.0 <= value <= CODE_LIMIT or abs(value * 10 - round(value * 10)) > 1e-6:
-                    raise scan.error(f"{letter}{text} is not a {letter} code (a whole number or "
-                                     f"one decimal, e.g. {letter}6.2)", start)
+            if letter in "GM" and not _valid_code(value):
+                example = "G6.2" if letter == "G" else "M30"
+                raise scan.error(f"{letter}{text} is not a valid {letter} code: a whole number "
+                                 f"or one decimal from 0 to 10000 (e.g. {example})", start)
             words.append(Word(letter, value, text, decimals, line, start + 1))
         elif char == "#":
             assign = _ASSIGN.match(body, start)
@@ -291,8 +332,8 @@ def tokenize_line(line_text: str, line: int, path: str,
         elif char == "/":
             raise scan.error("'/' (block delete) must be the first character of the line")
         elif char.isdigit() or char in "+-.":
-            number = _NUMBER.match(body, start)
-            shown = re.sub(r"\s", "", number.group()) if number else char
+            stray = _NUMBER.match(body, start)
+            shown = re.sub(_SPACE, "", stray.group()) if stray else char
             raise scan.error(f"'{shown}' has no letter in front of it (a word is a letter and a "
                              "number, e.g. X10.5)")
         else:

@@ -14,15 +14,19 @@ import numpy as np
 MAX_DEPTH = 40
 
 
-def simpson_lengths(speed: Callable[[np.ndarray], np.ndarray], a: np.ndarray, b: np.ndarray,
-                    tol_mm: np.ndarray) -> np.ndarray:
-    """Integral of speed over each [a_i, b_i] to tol_i: (M,), (M,), (M,) -> (M,)."""
-    a = np.asarray(a, dtype=float)
-    b = np.asarray(b, dtype=float)
+def simpson_lengths(speed: Callable[[np.ndarray], np.ndarray], nodes: np.ndarray,
+                    speed_at_nodes: np.ndarray, tol_mm: np.ndarray) -> np.ndarray:
+    """Integral of speed between consecutive nodes, each to tol_i: (M+1,), (M+1,), (M,) -> (M,).
+
+    speed_at_nodes: |C'| at the nodes, already known to the caller (the grid computes it with
+    the curvature), so the first round evaluates only the midpoints.
+    """
+    a = np.asarray(nodes[:-1], dtype=float)
+    b = np.asarray(nodes[1:], dtype=float)
     owner = np.arange(a.size)
     m = 0.5 * (a + b)
-    f = speed(np.concatenate([a, m, b]))
-    fa, fm, fb = f[: a.size], f[a.size: 2 * a.size], f[2 * a.size:]
+    fa, fb = speed_at_nodes[:-1], speed_at_nodes[1:]
+    fm = speed(m)
     whole = (b - a) / 6.0 * (fa + 4.0 * fm + fb)
     tol = np.broadcast_to(np.asarray(tol_mm, dtype=float), a.shape).copy()
     total = np.zeros(a.size)

@@ -1,11 +1,11 @@
 """A validated NURBS curve and its vectorised evaluation (points, derivatives, curvature).
 
 C(u) = sum N_i,p(u) w_i P_i / sum N_i,p(u) w_i  (paper Eq. 1). Evaluation works on the homogeneous
-curve A(u) = sum N_i,p w_i P_i, W(u) = sum N_i,p w_i with scipy's BSpline, then the quotient rule
-(Piegl & Tiller A4.2):  C = A/W,  C' = (A' - W'C)/W,  C'' = (A'' - 2W'C' - W''C)/W.
-
-The single-parameter evaluator used inside the stepping loop is `geometry.kernel`; both are
-checked against a textbook evaluator that lives in the tests.
+curve A(u) = sum N_i,p w_i P_i, W(u) = sum N_i,p w_i (basis derivatives by Piegl & Tiller A2.3),
+then the quotient rule (A4.2):  C = A/W,  C' = (A' - W'C)/W,  C'' = (A'' - 2W'C' - W''C)/W.
+Both evaluators live in `geometry.kernel` (compiled with numba): `eval_many` for the planning
+grid, `eval_d1` for the stepping loop; both are checked against a textbook evaluator that lives
+in the tests.
 """
 
 from __future__ import annotations
@@ -14,9 +14,8 @@ from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
-from scipy.interpolate import BSpline
-
 from nurbsfeed.errors import CurveError
+from nurbsfeed.geometry.kernel import eval_many
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -113,40 +112,35 @@ class NurbsCurve:
         return bool(np.all(np.ptp(self.points, axis=0) == 0.0))
 
     # ---- vectorised evaluation -------------------------------------------------------------------
-    @cached_property
-    def _spline(self) -> BSpline:
-        # Derivatives are evaluated with nu= (de Boor on the span), which, unlike
-        # BSpline.derivative(), accepts repeated interior knots (one-sided at the knot).
-        return BSpline(self.knots, self.homogeneous, self.degree, extrapolate=True)
+    def _eval(self, u: np.ndarray | float, order: int) -> np.ndarray:
+        """(order+1, *shape(u), 3) via the compiled evaluator of geometry.kernel."""
+        flat = np.ascontiguousarray(np.ravel(u), dtype=float)
+        out = np.empty((order + 1, flat.size, 3))
+        eval_many(self.knots, self.homogeneous, self.degree, flat, order, out)
+        return out.reshape((order + 1,) + np.shape(u) + (3,))
 
     def point(self, u: np.ndarray | float) -> np.ndarray:
         """C(u): (N,) -> (N, 3), or () -> (3,)."""
-        h = self._spline(u)
-        return h[..., :3] / h[..., 3:4]
+        return self._eval(u, 0)[0]
 
     def derivatives(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """C, C', C'' at u: (N,) -> three (N, 3) arrays."""
-        spline = self._spline
-        h0 = spline(u)
-        h1 = spline(u, nu=1)
-        h2 = spline(u, nu=2) if self.degree >= 2 else np.zeros_like(h0)
-        w0, w1, w2 = h0[..., 3:4], h1[..., 3:4], h2[..., 3:4]
-        c0 = h0[..., :3] / w0
-        c1 = (h1[..., :3] - w1 * c0) / w0
-        c2 = (h2[..., :3] - 2.0 * w1 * c1 - w2 * c0) / w0
+        c0, c1, c2 = self._eval(u, 2)
         return c0, c1, c2
 
     def speed(self, u: np.ndarray) -> np.ndarray:
         """|C'(u)|: (N,) -> (N,)."""
-        h0, h1 = self._spline(u), self._spline(u, nu=1)
-        c1 = (h1[..., :3] - h1[..., 3:4] * h0[..., :3] / h0[..., 3:4]) / h0[..., 3:4]
-        return np.linalg.norm(c1, axis=-1)
+        c1 = self._eval(u, 1)[1]
+        return np.sqrt(np.einsum("...i,...i->...", c1, c1))
 
 
 def curvature_from_derivatives(c1: np.ndarray, c2: np.ndarray) -> np.ndarray:
     """kappa = |C' x C''| / |C'|^3: (N, 3), (N, 3) -> (N,); NaN where C' = 0."""
-    cross = np.linalg.norm(np.cross(c1, c2), axis=-1)
-    speed = np.linalg.norm(c1, axis=-1)
+    x1, y1, z1 = c1[..., 0], c1[..., 1], c1[..., 2]
+    x2, y2, z2 = c2[..., 0], c2[..., 1], c2[..., 2]
+    cross = np.sqrt((y1 * z2 - z1 * y2) ** 2 + (z1 * x2 - x1 * z2) ** 2
+                    + (x1 * y2 - y1 * x2) ** 2)
+    speed = np.sqrt(x1 * x1 + y1 * y1 + z1 * z1)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(speed > 0.0, cross / speed**3, np.nan)
 

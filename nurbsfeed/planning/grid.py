@@ -14,8 +14,10 @@ import numpy as np
 from nurbsfeed.geometry.arclength import simpson_lengths
 from nurbsfeed.geometry.nurbs import NurbsCurve, curvature_from_derivatives
 
-GOLDEN = 0.5 * (np.sqrt(5.0) - 1.0)
-PEAK_ITERATIONS = 60  # golden-section steps: the bracket shrinks by 0.618^60 ~ 3e-13
+KAPPA_STEP_REL = 0.1  # refine where kappa changes by more than 10 % between nodes
+REFINE_ROUNDS = 6  # ... down to 1/64 of the base spacing
+ZOOM_SAMPLES = 11
+ZOOM_ROUNDS = 12  # the bracket (two grid steps) shrinks by 5^12 ~ 2e8
 ARC_REL_TOL = 1e-10  # arc length tolerance relative to the span's length
 MIN_NODES_PER_SPAN = 8
 
@@ -45,24 +47,34 @@ def _span_node_counts(curve: NurbsCurve, breaks: np.ndarray, spacing_mm: float) 
 
 
 def _kappa(curve: NurbsCurve, u: np.ndarray) -> np.ndarray:
+    return _kappa_and_speed(curve, u)[0]
+
+
+def _kappa_and_speed(curve: NurbsCurve, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     _, c1, c2 = curve.derivatives(u)
-    return curvature_from_derivatives(c1, c2)
+    return curvature_from_derivatives(c1, c2), np.sqrt(np.einsum("ij,ij->i", c1, c1))
+
 
 
 def _refine_peaks(curve: NurbsCurve, low: np.ndarray, high: np.ndarray) -> np.ndarray:
-    """Golden-section search for the maximum of kappa in each [low_i, high_i], all at once."""
-    x1 = high - GOLDEN * (high - low)
-    x2 = low + GOLDEN * (high - low)
-    f1, f2 = _kappa(curve, x1), _kappa(curve, x2)
-    for _ in range(PEAK_ITERATIONS):
-        left = np.nan_to_num(f1, nan=-1.0) >= np.nan_to_num(f2, nan=-1.0)
-        high = np.where(left, x2, high)
-        low = np.where(left, low, x1)
-        new_x = np.where(left, high - GOLDEN * (high - low), low + GOLDEN * (high - low))
-        f_new = _kappa(curve, new_x)
-        x2, f2, x1, f1 = (np.where(left, x1, new_x), np.where(left, f1, f_new),
-                          np.where(left, new_x, x2), np.where(left, f_new, f2))
-    return 0.5 * (low + high)
+    """The maximum of kappa in each bracket [low_i, high_i], all brackets at once.
+
+    Zoom sampling: ZOOM_SAMPLES points per bracket, keep the best and its neighbours as the next
+    bracket, ZOOM_ROUNDS times (the bracket shrinks by ZOOM_SAMPLES/2 per round). Unlike a
+    parabolic or Newton step it needs no smoothness, so a maximum on a knot (a kink in kappa)
+    is found as well as a smooth one.
+    """
+    frac = np.linspace(0.0, 1.0, ZOOM_SAMPLES)
+    best = 0.5 * (low + high)
+    for _ in range(ZOOM_ROUNDS):
+        u = low[:, None] + (high - low)[:, None] * frac[None, :]
+        k = np.nan_to_num(_kappa(curve, u.ravel()), nan=-1.0).reshape(u.shape)
+        i = np.argmax(k, axis=1)
+        rows = np.arange(u.shape[0])
+        best = u[rows, i]
+        low = u[rows, np.maximum(i - 1, 0)]
+        high = u[rows, np.minimum(i + 1, ZOOM_SAMPLES - 1)]
+    return best
 
 
 def _corners(curve: NurbsCurve, breaks: np.ndarray) -> np.ndarray:
@@ -82,18 +94,39 @@ def _corners(curve: NurbsCurve, breaks: np.ndarray) -> np.ndarray:
     return cand[cos < 1.0 - 1e-8]
 
 
-def build_grid(curve: NurbsCurve, spacing_mm: float,
-               extra_u: np.ndarray = np.empty(0)) -> Grid:
+def _refine_where_kappa_jumps(curve: NurbsCurve, u: np.ndarray, kappa: np.ndarray,
+                              speed: np.ndarray, kappa_floor: float):
+    """Halve every interval across which kappa (above kappa_floor) changes by more than
+    KAPPA_STEP_REL, up to REFINE_ROUNDS times. The planner bounds the limit between two nodes by
+    the lower of their limits; near a sharp curvature peak that bound is only tight when the
+    nodes are close, so the grid is made dense exactly there."""
+    for _ in range(REFINE_ROUNDS):
+        high = np.maximum(kappa[:-1], kappa[1:])
+        split = (high > kappa_floor) & (np.abs(np.diff(kappa)) > KAPPA_STEP_REL * high)
+        if not np.any(split):
+            break
+        mid = 0.5 * (u[:-1][split] + u[1:][split])
+        k_mid, s_mid = _kappa_and_speed(curve, mid)
+        order = np.argsort(np.concatenate([u, mid]), kind="stable")
+        u = np.concatenate([u, mid])[order]
+        kappa = np.concatenate([kappa, _fill_singular(k_mid)])[order]
+        speed = np.concatenate([speed, s_mid])[order]
+    return u, kappa, speed
+
+
+def build_grid(curve: NurbsCurve, spacing_mm: float, extra_u: np.ndarray = np.empty(0),
+               kappa_floor: float = np.inf) -> Grid:
     """Sample, find and refine curvature maxima, integrate arc length: the planning grid.
 
-    extra_u: parameters that must be nodes (where the programmed feed changes).
+    extra_u: parameters that must be nodes (where the programmed feed changes); kappa_floor:
+    below it the limit does not depend on curvature (kappa_0), so no refinement is needed.
     """
     breaks = curve.span_breaks
     counts = _span_node_counts(curve, breaks, spacing_mm)
     pieces = [np.linspace(breaks[i], breaks[i + 1], counts[i], endpoint=False)
               for i in range(len(breaks) - 1)]
     u = np.concatenate(pieces + [breaks[-1:]])
-    kappa = _kappa(curve, u)
+    kappa, speed = _kappa_and_speed(curve, u)
     kappa = _fill_singular(kappa)
 
     # Local maxima on the samples (a plateau counts once, at its first node), then refined
@@ -107,15 +140,20 @@ def build_grid(curve: NurbsCurve, spacing_mm: float,
     peak_u = np.where(better, refined, u[idx])
     corner_u = _corners(curve, breaks)
 
-    u_all = np.unique(np.concatenate([u, peak_u, corner_u, extra_u]))
-    kappa_all = _fill_singular(_kappa(curve, u_all))
+    extra = np.concatenate([peak_u, corner_u, extra_u])
+    u_all, first = np.unique(np.concatenate([u, extra]), return_index=True)
+    # kappa and |C'| of the sample nodes are known; only the added nodes are evaluated
+    kappa_extra, speed_extra = _kappa_and_speed(curve, extra)
+    kappa_all = _fill_singular(np.concatenate([kappa, kappa_extra])[first])
+    speed_all = np.concatenate([speed, speed_extra])[first]
+    u_all, kappa_all, speed_all = _refine_where_kappa_jumps(curve, u_all, kappa_all, speed_all,
+                                                            kappa_floor)
     corner_index = np.searchsorted(u_all, corner_u)
     kappa_all[corner_index] = np.inf
     peak_index = np.searchsorted(u_all, peak_u)
 
-    lengths = simpson_lengths(curve.speed, u_all[:-1], u_all[1:],
-                              ARC_REL_TOL * np.maximum(np.abs(np.diff(u_all)), 0.0)
-                              * _mean_speed(curve))
+    lengths = simpson_lengths(curve.speed, u_all, speed_all,
+                              ARC_REL_TOL * np.diff(u_all) * _mean_speed(speed))
     s = np.concatenate([[0.0], np.cumsum(lengths)])
     for a in (u_all, s, kappa_all, peak_index, corner_index):
         a.setflags(write=False)
@@ -138,9 +176,8 @@ def _prominent(kappa: np.ndarray, idx: np.ndarray) -> np.ndarray:
     return idx[kappa[idx] > lowest_side * (1.0 + PEAK_PROMINENCE_REL)]
 
 
-def _mean_speed(curve: NurbsCurve) -> float:
-    u = np.linspace(curve.u_min, curve.u_max, 65)
-    return float(np.mean(curve.speed(u))) + 1e-300
+def _mean_speed(speed: np.ndarray) -> float:
+    return float(np.mean(speed)) + 1e-300
 
 
 def _fill_singular(kappa: np.ndarray) -> np.ndarray:

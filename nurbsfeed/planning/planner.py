@@ -1,7 +1,7 @@
 """Plan one curve: key points, nominal speeds, bidirectional scan, S-curve segments, limits
 everywhere, whole periods (SPEC §2).
 
-1. Grid: nodes <= v_m T apart with arc length and curvature (planning.grid).
+1. Grid: nodes <= 2 v_m T apart with arc length and curvature (planning.grid).
 2. Key points: both ends (speed 0), every curvature maximum with kappa >= kappa_0 (nominal speed
    from Eq. 15), every sharp corner (speed 0), every change of programmed feed.
 3. Bidirectional scan (Eq. 22): backward from the end, each key speed is lowered until the next
@@ -21,7 +21,8 @@ everywhere, whole periods (SPEC §2).
    interpolation point falls exactly on the corner.
 
 Speeds at grid nodes are checked against an eroded limit (the minimum over each node and its two
-neighbours), which covers interpolation points that fall between nodes.
+neighbours, at most two full-speed steps away), which covers interpolation points that fall
+between nodes.
 """
 
 from __future__ import annotations
@@ -33,13 +34,15 @@ import numpy as np
 from nurbsfeed.geometry.nurbs import NurbsCurve
 from nurbsfeed.planning.grid import Grid, build_grid
 from nurbsfeed.planning.limits import Limits, curvature_threshold, speed_limit
-from nurbsfeed.planning.scurve import peak_speeds, reachable_speed, transition_distance_mm
+from nurbsfeed.planning.scurve import scan_speeds, segment_profiles
 from nurbsfeed.planning.timelaw import TimeLaw
 
 MAX_FIX_ROUNDS = 40
 SPEED_CHECK_REL_TOL = 1e-9  # a node "violates" when v > limit * (1 + this)
+GRID_STEPS = 2.0  # grid nodes at most this many full-speed steps apart
 MAX_GRID_NODES = 200_000  # per curve: spacing grows for very long curves at tiny periods
-PERIOD_ROUNDING_REL = 1e-9  # a duration within this of a whole period count is not stretched
+PERIOD_ROUNDING_REL = 1e-9
+HOLD_ROOM = 0.05  # holds leave at least this fraction of a segment for its transitions  # a duration within this of a whole period count is not stretched
 
 KIND_END, KIND_PEAK, KIND_CORNER, KIND_FEED, KIND_HOLD = range(5)
 KIND_NAMES = {KIND_END: "end", KIND_PEAK: "peak", KIND_CORNER: "corner", KIND_FEED: "feed",
@@ -123,18 +126,6 @@ def _eroded(v: np.ndarray, stops: np.ndarray) -> np.ndarray:
     return out
 
 
-def _scan(nominal: np.ndarray, length: np.ndarray, cap: np.ndarray, lim: Limits) -> np.ndarray:
-    """Eq. 22: backward pass (deceleration reachable), forward pass (acceleration reachable)."""
-    v = np.minimum(nominal, np.concatenate([[np.inf], cap]))
-    v = np.minimum(v, np.concatenate([cap, [np.inf]]))
-    a, j = lim.acc_mm_s2, lim.jerk_mm_s3
-    for i in range(len(v) - 2, -1, -1):
-        v[i] = min(v[i], reachable_speed(v[i + 1], length[i], a, j, v[i]))
-    for i in range(len(v) - 1):
-        v[i + 1] = min(v[i + 1], reachable_speed(v[i], length[i], a, j, v[i + 1]))
-    return v
-
-
 def _segments_of_nodes(key_node: np.ndarray, n_nodes: int) -> np.ndarray:
     """For each grid node, the segment it lies in (key nodes belong to the segment they start)."""
     seg = np.searchsorted(key_node, np.arange(n_nodes), side="right") - 1
@@ -145,16 +136,16 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
                feed_mm_s: np.ndarray = np.empty(0)) -> Plan:
     """Plan the feed along one curve under `lim` (feed cap already in lim.feed_mm_s)."""
     rough_length = float(np.sum(np.linalg.norm(np.diff(curve.points, axis=0), axis=1)))
-    spacing = max(lim.feed_mm_s * lim.period_s, rough_length / MAX_GRID_NODES)
+    spacing = max(GRID_STEPS * lim.feed_mm_s * lim.period_s, rough_length / MAX_GRID_NODES)
     feed_breaks = feed_u[1:] if feed_u.size else feed_u
-    grid = build_grid(curve, spacing, feed_breaks)
+    kappa0 = curvature_threshold(lim)
+    grid = build_grid(curve, spacing, feed_breaks, kappa0)
     fcap = feed_at(grid.u, feed_u, feed_mm_s)
     # corners (tangent jumps) and cusps (kappa infinite inside the curve) are passed at rest
     last = grid.u.size - 1
     stops = np.union1d(grid.corner_index, np.flatnonzero(np.isinf(grid.kappa_1_mm)))
     stops = stops[(stops > 0) & (stops < last)]
     limit = _eroded(speed_limit(grid.kappa_1_mm, lim, fcap), stops)
-    kappa0 = curvature_threshold(lim)
 
     # ---- key points -----------------------------------------------------------------------
     peaks = grid.peak_index[grid.kappa_1_mm[grid.peak_index] >= kappa0]
@@ -176,7 +167,7 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
     hold_end = np.zeros(len(key_node) - 1)
     seg_of_node = _segments_of_nodes(key_node, grid.u.size)
     cap = np.full(len(key_node) - 1, lim.feed_mm_s)
-    np.minimum.at(cap, seg_of_node, np.where(np.isfinite(fcap), fcap, np.inf))
+    np.minimum.at(cap, seg_of_node, fcap)
     a, j = lim.acc_mm_s2, lim.jerk_mm_s3
 
     rounds = 0
@@ -184,8 +175,8 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
         key_s = grid.s_mm[key_node]
         length = np.diff(key_s)
         free = np.maximum(length - hold_start - hold_end, 0.0)
-        v = _scan(nominal, free, cap, lim)
-        peak = peak_speeds(v[:-1], v[1:], free, cap, a, j)
+        v = scan_speeds(nominal, free, cap, a, j)
+        peak, d_up, d_down = segment_profiles(v, free, cap, a, j)
         law = TimeLaw.from_segments(key_s, v, peak, hold_start, hold_end, a, j)
         v_nodes = law.speed_at_arc(grid.s_mm)
         bad = v_nodes > limit * (1.0 + SPEED_CHECK_REL_TOL)
@@ -193,8 +184,8 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
         if not np.any(bad) or rounds == MAX_FIX_ROUNDS:
             break
         rounds += 1
-        accel_end = key_s[:-1] + hold_start + transition_distance_mm(v[:-1], peak, a, j)
-        decel_start = key_s[1:] - hold_end - transition_distance_mm(peak, v[1:], a, j)
+        accel_end = key_s[:-1] + hold_start + d_up
+        decel_start = key_s[1:] - hold_end - d_down
         changed = False
         for seg in np.unique(seg_of_node[bad]):
             nodes_bad = np.flatnonzero(bad & (seg_of_node == seg))
@@ -213,10 +204,16 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
                 if 0.0 < lowest < cap[seg]:
                     cap[seg] = lowest
                     changed = True
-            need = transition_distance_mm(v[seg], v[seg + 1], a, j)
-            if new_start + new_end + need <= length[seg]:
+            # A hold shortens what is left for the transitions; the next scan lowers the key
+            # speeds until they fit. Holds that would meet leave no room: lower the cap instead.
+            if new_start + new_end < length[seg] * (1.0 - HOLD_ROOM):
                 changed |= (new_start, new_end) != (hold_start[seg], hold_end[seg])
                 hold_start[seg], hold_end[seg] = new_start, new_end
+            else:
+                lowest = float(limit[nodes_bad].min())
+                if 0.0 < lowest < cap[seg]:
+                    cap[seg] = lowest
+                    changed = True
         if not changed:
             break
 

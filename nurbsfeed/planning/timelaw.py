@@ -11,9 +11,128 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from nurbsfeed.jit import jit
 from nurbsfeed.planning.scurve import transition_phases
 
-ARC_BISECTIONS = 60
+ARC_ITERATIONS = 80  # Newton converges in ~5; bisection fallback needs <= 60
+PHASES_PER_SEGMENT = 9  # hold, 3 up, cruise, 3 down, hold
+
+
+@jit
+def _build(s_key, v_key, v_peak, hold_start, hold_end, acc, jerk):
+    """Chain the segments into constant-jerk pieces; see TimeLaw.from_segments."""
+    n_seg = s_key.size - 1
+    cap = n_seg * PHASES_PER_SEGMENT
+    t0 = np.empty(cap)
+    s0 = np.empty(cap)
+    v0 = np.empty(cap)
+    a0 = np.empty(cap)
+    jk = np.empty(cap)
+    key_t = np.zeros(s_key.size)
+    durations = np.empty(PHASES_PER_SEGMENT)
+    jerks = np.empty(PHASES_PER_SEGMENT)
+    work_d = np.empty(3)
+    work_j = np.empty(3)
+    count = 0
+    t = 0.0
+    for i in range(n_seg):
+        key_t[i] = t
+        va = v_key[i]
+        vb = v_key[i + 1]
+        vp = v_peak[i]
+        length = s_key[i + 1] - s_key[i]
+        if length <= 0.0:
+            continue
+        n = 0
+        if hold_start[i] > 0.0 and va > 0.0:
+            durations[n] = hold_start[i] / va
+            jerks[n] = 0.0
+            n += 1
+        m = transition_phases(va, vp, acc, jerk, work_d, work_j)
+        d_up = 0.0
+        for q in range(m):
+            durations[n] = work_d[q]
+            jerks[n] = work_j[q]
+            d_up += work_d[q]
+            n += 1
+        d_up *= 0.5 * (va + vp)
+        n_cruise = n
+        n += 1
+        m = transition_phases(vp, vb, acc, jerk, work_d, work_j)
+        d_down = 0.0
+        for q in range(m):
+            durations[n] = work_d[q]
+            jerks[n] = work_j[q]
+            d_down += work_d[q]
+            n += 1
+        d_down *= 0.5 * (vp + vb)
+        if hold_end[i] > 0.0 and vb > 0.0:
+            durations[n] = hold_end[i] / vb
+            jerks[n] = 0.0
+            n += 1
+        # the cruise takes whatever distance the transitions and holds leave
+        cruise = max(length - hold_start[i] - hold_end[i] - d_up - d_down, 0.0)
+        durations[n_cruise] = cruise / vp if vp > 0.0 else 0.0
+        jerks[n_cruise] = 0.0
+        s = s_key[i]
+        v = va
+        a = 0.0
+        for q in range(n):
+            dur = durations[q]
+            if dur <= 0.0:
+                continue
+            j = jerks[q]
+            t0[count] = t
+            s0[count] = s
+            v0[count] = v
+            a0[count] = a
+            jk[count] = j
+            count += 1
+            s += v * dur + a * dur * dur / 2.0 + j * dur * dur * dur / 6.0
+            v += a * dur + j * dur * dur / 2.0
+            a += j * dur
+            t += dur
+    key_t[n_seg] = t
+    return t0[:count].copy(), s0[:count].copy(), v0[:count].copy(), a0[:count].copy(), \
+        jk[:count].copy(), key_t, t
+
+
+@jit
+def _speed_at_arc(t0, s0, v0, a0, jk, duration, s_query, out):
+    """v where the law passes each arc length: binary search of the piece, then Newton on
+    s(tau) = s (f' = v >= 0) kept inside a shrinking bracket, bisecting when a step leaves it."""
+    n = t0.size
+    for q in range(s_query.size):
+        s = s_query[q]
+        lo = 0
+        hi = n - 1
+        while lo < hi:  # last piece with s0 <= s
+            mid = (lo + hi + 1) // 2
+            if s0[mid] <= s:
+                lo = mid
+            else:
+                hi = mid - 1
+        i = lo
+        end = t0[i + 1] if i + 1 < n else duration
+        low = 0.0
+        high = end - t0[i]
+        vi, ai, ji, target = v0[i], a0[i], jk[i], s - s0[i]
+        tau = 0.5 * high
+        for _ in range(ARC_ITERATIONS):
+            f = tau * (vi + tau * (ai / 2.0 + tau * ji / 6.0)) - target
+            if f < 0.0:
+                low = tau
+            else:
+                high = tau
+            slope = vi + tau * (ai + tau * ji / 2.0)
+            step = tau - f / slope if slope > 0.0 else -1.0
+            if step <= low or step >= high:
+                step = 0.5 * (low + high)
+            if abs(step - tau) <= 1e-15 * (tau + 1e-300) or high - low <= 1e-15 * high:
+                tau = step
+                break
+            tau = step
+        out[q] = vi + tau * (ai + tau * ji / 2.0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -38,43 +157,14 @@ class TimeLaw:
         s_key, v_key: (K,); the others (K-1,). Each segment ends exactly at s_key[i+1]: the cruise
         takes up whatever distance the transitions leave, and the state is reset at every key.
         """
-        t0, s0, v0, a0, jk = [], [], [], [], []
-        key_t = np.zeros(len(s_key_mm))
-        t = 0.0
-        for i in range(len(s_key_mm) - 1):
-            key_t[i] = t
-            va, vb, vp = float(v_key_mm_s[i]), float(v_key_mm_s[i + 1]), float(v_peak_mm_s[i])
-            length = float(s_key_mm[i + 1] - s_key_mm[i])
-            if length <= 0.0:
-                continue
-            up = transition_phases(va, vp, acc_mm_s2, jerk_mm_s3)
-            down = transition_phases(vp, vb, acc_mm_s2, jerk_mm_s3)
-            d_up = 0.5 * (va + vp) * sum(d for d, _ in up)
-            d_down = 0.5 * (vp + vb) * sum(d for d, _ in down)
-            cruise = max(length - hold_start_mm[i] - hold_end_mm[i] - d_up - d_down, 0.0)
-            phases: list[tuple[float, float]] = []
-            if hold_start_mm[i] > 0.0 and va > 0.0:
-                phases.append((hold_start_mm[i] / va, 0.0))
-            phases += up
-            if cruise > 0.0 and vp > 0.0:
-                phases.append((cruise / vp, 0.0))
-            phases += down
-            if hold_end_mm[i] > 0.0 and vb > 0.0:
-                phases.append((hold_end_mm[i] / vb, 0.0))
-            s, v, a = float(s_key_mm[i]), va, 0.0
-            for dur, j in phases:
-                if dur <= 0.0:
-                    continue
-                t0.append(t), s0.append(s), v0.append(v), a0.append(a), jk.append(j)
-                s += v * dur + a * dur**2 / 2.0 + j * dur**3 / 6.0
-                v += a * dur + j * dur**2 / 2.0
-                a += j * dur
-                t += dur
-        key_t[-1] = t
-        arrays = [np.array(x, dtype=float) for x in (t0, s0, v0, a0, jk)] + [key_t]
+        f = np.ascontiguousarray
+        *arrays, duration = _build(f(s_key_mm, dtype=float), f(v_key_mm_s, dtype=float),
+                                   f(v_peak_mm_s, dtype=float), f(hold_start_mm, dtype=float),
+                                   f(hold_end_mm, dtype=float), float(acc_mm_s2),
+                                   float(jerk_mm_s3))
         for arr in arrays:
             arr.setflags(write=False)
-        return cls(*arrays, duration_s=t, length_mm=float(s_key_mm[-1]))
+        return cls(*arrays, duration_s=float(duration), length_mm=float(s_key_mm[-1]))
 
     @property
     def is_empty(self) -> bool:
@@ -105,19 +195,10 @@ class TimeLaw:
         return (self.s0_mm[i[1:]] - self.s0_mm[i[:-1]]) + (local[1:] - local[:-1])
 
     def speed_at_arc(self, s_mm: np.ndarray) -> np.ndarray:
-        """v where the law passes arc length s: (M,) -> (M,), by bisection in each piece."""
-        s_mm = np.asarray(s_mm, dtype=float)
-        if self.is_empty:
-            return np.zeros_like(s_mm)
-        i = np.clip(np.searchsorted(self.s0_mm, s_mm, side="right") - 1, 0, len(self.s0_mm) - 1)
-        end = np.append(self.t0_s[1:], self.duration_s)
-        low = np.zeros_like(s_mm)
-        high = end[i] - self.t0_s[i]
-        v0, a0, j, s0 = self.v0_mm_s[i], self.a0_mm_s2[i], self.jerk_mm_s3[i], self.s0_mm[i]
-        for _ in range(ARC_BISECTIONS):
-            mid = 0.5 * (low + high)
-            below = s0 + mid * (v0 + mid * (a0 / 2.0 + mid * j / 6.0)) < s_mm
-            low = np.where(below, mid, low)
-            high = np.where(below, high, mid)
-        tau = 0.5 * (low + high)
-        return v0 + tau * (a0 + tau * j / 2.0)
+        """v where the law passes arc length s: (M,) -> (M,)."""
+        s_mm = np.ascontiguousarray(s_mm, dtype=float)
+        out = np.zeros_like(s_mm)
+        if not self.is_empty:
+            _speed_at_arc(self.t0_s, self.s0_mm, self.v0_mm_s, self.a0_mm_s2, self.jerk_mm_s3,
+                          self.duration_s, s_mm, out)
+        return out

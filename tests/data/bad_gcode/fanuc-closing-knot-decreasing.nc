@@ -1,0 +1,15 @@
+; expect: 11:1: K0.5: knots must not decrease (K1. on line 10 before it) (Mitsubishi error P551)
+%
+O2000 (BAD INPUT CASE)
+G17 G21 G40 G49 G80 G90 G94
+G0 X0. Y0. Z5.
+G1 Z-1. F800.
+G06.2 P3 K0. X0. Y0. F2000.
+K0. X10. Y10.
+K0. X20. Y0.
+K1.
+K0.5
+K1.
+G0 Z5.
+M30
+%

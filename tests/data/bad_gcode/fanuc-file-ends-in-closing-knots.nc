@@ -1,0 +1,11 @@
+; expect: 7:1: the file ends inside the G06.2 curve started here: it has only 2 of its 3 knot-only blocks
+%
+O2000 (BAD INPUT CASE)
+G17 G21 G40 G49 G80 G90 G94
+G0 X0. Y0. Z5.
+G1 Z-1. F800.
+G06.2 P3 K0. X0. Y0. F2000.
+K0. X10. Y10.
+K0. X20. Y0.
+K1.
+K1.

@@ -1,0 +1,17 @@
+; expect: 9:1: K0.2: the first 4 knots must be equal (clamped start, order 4); K0. on line 7 starts the curve (Fanuc alarm PS1007)
+%
+O2000 (BAD INPUT CASE)
+G17 G21 G40 G49 G80 G90 G94
+G0 X0. Y0. Z5.
+G1 Z-1. F800.
+G06.2 P4 K0. X0. Y0. F2000.
+K0. X10. Y10.
+K0.2 X20. Y0.
+K0.2 X30. Y10.
+K1.
+K1.
+K1.
+K1.
+G0 Z5.
+M30
+%

@@ -1,0 +1,13 @@
+; expect: 9:1: M9 does not belong in a G5.2 block (X Y P L F)
+%
+O2000 (BAD INPUT CASE)
+G17 G21 G40 G49 G80 G90 G94
+G0 X0. Y0. Z5.
+G1 Z-1. F800.
+G5.2
+X10. Y10. P1
+M9
+G5.3
+G0 Z5.
+M30
+%

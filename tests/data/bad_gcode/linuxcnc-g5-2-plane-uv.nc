@@ -1,0 +1,13 @@
+; expect: 8:1: G5.2 needs plane G17, G18 or G19, not G17.1
+%
+O2000 (BAD INPUT CASE)
+G17 G21 G40 G49 G80 G90 G94
+G0 X0. Y0. Z5.
+G1 Z-1. F800.
+G17.1
+G5.2
+X10. Y10. P1
+G5.3
+G0 Z5.
+M30
+%

@@ -1,0 +1,10 @@
+; expect: 7:9: '20.' has no letter in front of it (a word is a letter and a number, e.g. X10.5)
+%
+O2000 (BAD INPUT CASE)
+G17 G21 G40 G49 G80 G90 G94
+G0 X0. Y0. Z5.
+G1 Z-1. F800.
+G1 X10. 20.
+G0 Z5.
+M30
+%

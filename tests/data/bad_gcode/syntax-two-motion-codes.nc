@@ -1,0 +1,10 @@
+; expect: 7:4: G0 and G1 are both motion codes; one per block
+%
+O2000 (BAD INPUT CASE)
+G17 G21 G40 G49 G80 G90 G94
+G0 X0. Y0. Z5.
+G1 Z-1. F800.
+G0 G1 X10.
+G0 Z5.
+M30
+%

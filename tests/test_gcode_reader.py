@@ -1,0 +1,452 @@
+"""The G-code reader: curves read from Fanuc and LinuxCNC programs, pass-through lines, modal state
+and every bad input (tests/data/bad_gcode, one file per case, its expected message on line 1)."""
+
+from __future__ import annotations
+
+import math
+import random
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from nurbsfeed.errors import CurveError, InputError
+from nurbsfeed.gcode import read_gcode
+from nurbsfeed.gcode.linuxcnc import uniform_knots
+from nurbsfeed.program import CurveBlock, PassThrough
+
+ROOT = Path(__file__).resolve().parent.parent
+SAMPLES = ROOT / "samples"
+BAD = Path(__file__).resolve().parent / "data" / "bad_gcode"
+PREAMBLE = "G17 G21 G90 G94\nG0 X0 Y0 Z0\n"
+
+
+def source_lines(text: str) -> list[str]:
+    """The lines as the reader counts them: only "\\n" ends a line (a lone "\\r" does not)."""
+    return re.findall(r"[^\n]*\n|[^\n]+\Z", text)
+
+
+def load(path: Path) -> str:
+    with open(path, encoding="utf-8", errors="surrogateescape", newline="") as handle:
+        return handle.read()
+
+
+def read(text: str, dialect: str = "auto", name: str = "t.nc") -> list:
+    return list(read_gcode(Path(name), text, dialect))
+
+
+def curves(items: list) -> list[CurveBlock]:
+    return [item for item in items if isinstance(item, CurveBlock)]
+
+
+def only_curve(text: str, dialect: str = "auto") -> CurveBlock:
+    found = curves(read(text, dialect))
+    assert len(found) == 1
+    return found[0]
+
+
+def assert_curve(block: CurveBlock, degree: int, knots: list, points: list,
+                 weights: list | None = None) -> None:
+    curve = block.curve
+    assert curve.degree == degree
+    np.testing.assert_array_equal(curve.knots, knots)
+    np.testing.assert_array_equal(curve.points, points)
+    np.testing.assert_array_equal(curve.weights, weights or [1.0] * len(points))
+
+
+# ---- the samples, against hand-derived curves ---------------------------------------------------
+def test_linuxcnc_docs_example() -> None:
+    """The reference's G5.2 example: start point prepended, knots 0 0 0 1 2 3 3 3 (order 3)."""
+    items = read(load(SAMPLES / "linuxcnc-docs.ngc"), name="linuxcnc-docs.ngc")
+    (block,) = curves(items)
+    z = -0.02
+    assert_curve(block, 2, [0, 0, 0, 1, 2, 3, 3, 3],
+                 [[0, 0, z], [0, 1, z], [2, 2, z], [2, 0, z], [0, 0, z]], [1, 1, 1, 1, 2])
+    assert (str(block.location), block.units, block.eol) == ("linuxcnc-docs.ngc:13:1", "in", "\n")
+    assert block.feed_word_after == "F60"
+    np.testing.assert_array_equal(block.feed_mm_s, [1.0])  # F60 in/min = 1 in/s
+
+
+def test_uniform_knots_follow_linuxcnc_knot_vector_creator() -> None:
+    assert uniform_knots(5, 3) == [0, 0, 0, 1, 2, 3, 3, 3]
+    assert uniform_knots(4, 4) == [0, 0, 0, 0, 1, 1, 1, 1]
+    assert uniform_knots(7, 4) == [0, 0, 0, 0, 1, 2, 3, 4, 4, 4, 4]
+
+
+def test_fanuc_quadratic() -> None:
+    (block,) = curves(read(load(SAMPLES / "fanuc-quadratic.nc")))
+    z = -0.5
+    assert_curve(block, 2, [0, 0, 0, 0.5, 1, 1, 1],
+                 [[0, 0, z], [20, 30, z], [40, -10, z], [60, 20, z]])
+    assert block.location.line == 10 and block.location.col == 5
+    assert block.feed_word_after == "F3000." and block.curve.name == "N70 line 10"
+    np.testing.assert_array_equal(block.feed_u, [0.0])
+    np.testing.assert_array_equal(block.feed_mm_s, [50.0])
+
+
+def test_fanuc_rational_quarter_circle_is_exact() -> None:
+    (block,) = curves(read(load(SAMPLES / "fanuc-rational-quarter-circle.nc")))
+    assert_curve(block, 2, [0, 0, 0, 1, 1, 1], [[50, 0, -1], [50, 50, -1], [0, 50, -1]],
+                 [1, 0.7071068, 1])
+    points = block.curve.point(np.linspace(0.0, 1.0, 2001))
+    radius = np.hypot(points[:, 0], points[:, 1])
+    # the weight is written to 7 decimals: sqrt(2)/2 - 0.7071068 = -1.9e-8 moves the arc < 1 um
+    assert np.max(np.abs(radius - 50.0)) < 1e-6
+    assert np.max(np.abs(radius - 50.0)) > 1e-9  # ... and it is the written weight, not sqrt(2)/2
+
+
+def test_fanuc_multi_curve_crlf_modal_continuation_and_feed_steps() -> None:
+    items = read(load(SAMPLES / "fanuc-multi-curve.nc"))
+    first, second, third = curves(items)
+    assert_curve(first, 3, [0, 0, 0, 0, 0.3, 0.6, 1, 1, 1, 1],
+                 [[0, 0, -1], [10, 15, -1], [25, 15, -1], [35, 0, -1], [45, -15, -1],
+                  [60, -15, -1]], [1, 1, 1.2, 1, 1, 1])
+    np.testing.assert_array_equal(first.feed_u, [0.0, 0.6])  # F2500. on the knot-0.6 point
+    np.testing.assert_allclose(first.feed_mm_s, [4000 / 60, 2500 / 60], rtol=1e-15)
+    # N170 has no G06.2: the modal curve starts at the end of the first, at the F in force
+    assert_curve(second, 2, [0, 0, 0, 1, 2, 2, 2],
+                 [[60, -15, -1], [75, -15, -1.5], [75, 0, -2], [65, 10, -2]])
+    np.testing.assert_allclose(second.feed_mm_s, [2500 / 60], rtol=1e-15)
+    assert (second.location.line, second.location.col) == (22, 6)
+    assert_curve(third, 3, [0, 0, 0, 0, 0.5, 1, 1, 1, 1],
+                 [[0, 30, -0.5], [15, 45, -0.5], [30, 20, -0.5], [45, 45, -0.5], [60, 30, -0.5]])
+    assert [c.feed_word_after for c in (first, second, third)] == ["F2500.", "F2500.", "F5000."]
+    assert {c.eol for c in (first, second, third)} == {"\r\n"}
+
+
+def test_linuxcnc_g62_with_q_and_g62_knot_lines() -> None:
+    (block,) = curves(read(load(SAMPLES / "linuxcnc-g62.ngc")))
+    assert_curve(block, 3, [0, 0, 0, 0, 1, 1, 1, 1],
+                 [[0, 0, -1], [10, 30, -1], [40, 30, -1], [50, 0, -1]])
+    assert block.feed_word_after == "F2500"
+
+
+def test_inch_program_keeps_inches() -> None:
+    (block,) = curves(read(load(SAMPLES / "inch-program.nc")))
+    assert block.units == "in"
+    assert_curve(block, 3, [0, 0, 0, 0, 1, 1, 1, 1],
+                 [[0, 0, -0.02], [0.4, 0.8, -0.02], [1.2, 0.8, -0.02], [1.6, 0, -0.02]])
+    np.testing.assert_allclose(block.feed_mm_s, [80 / 60], rtol=1e-15)  # in/s here
+
+
+# The lines each sample's NURBS blocks occupy (1-based, inclusive), counted by hand.
+BLOCK_LINES = {
+    "linuxcnc-docs.ngc": [(13, 18)],
+    "fanuc-quadratic.nc": [(10, 16)],
+    "fanuc-rational-quarter-circle.nc": [(9, 14)],
+    "fanuc-multi-curve.nc": [(11, 20), (22, 28), (41, 49)],
+    "linuxcnc-g62.ngc": [(11, 18)],
+    "inch-program.nc": [(9, 16)],
+}
+
+
+@pytest.mark.parametrize("name", sorted(BLOCK_LINES))
+def test_every_other_line_passes_through_byte_for_byte(name: str) -> None:
+    text = load(SAMPLES / name)
+    lines = source_lines(text)
+    ranges = BLOCK_LINES[name]
+    inside = {n for first, last in ranges for n in range(first, last + 1)}
+    expected = [line for n, line in enumerate(lines, start=1) if n not in inside]
+    items = read(text)
+    assert [item.text for item in items if isinstance(item, PassThrough)] == expected
+    assert [c.location.line for c in curves(items)] == [first for first, _ in ranges]
+    # ... and in file order: each curve sits where its block was
+    order = [("C" if isinstance(item, CurveBlock) else "P") for item in items]
+    expected_order = []
+    for n in range(1, len(lines) + 1):
+        if any(n == first for first, _ in ranges):
+            expected_order.append("C")
+        elif n not in inside:
+            expected_order.append("P")
+    assert order == expected_order
+    if name == "fanuc-multi-curve.nc":
+        assert all(line.endswith("\r\n") for line in expected)
+
+
+# ---- one curve, three dialects ------------------------------------------------------------------
+G06_2 = PREAMBLE + """G06.2 P3 K0. X0. Y0. R2. F1200.
+K0. X10. Y20. R1.
+K0. X30. Y20. R0.5
+K1. X40. Y0. R1.
+K2. X50. Y10. R1.
+K3.
+K3.
+K3.
+"""
+G6_2 = PREAMBLE + """G6.2 P3 Q2 K0 X0 Y0 R2 F1200
+K0 X10 Y20 R1
+K0 X30 Y20 R0.5
+K1 X40 Y0 R1
+K2 X50 Y10 R1
+G6.2 K3
+G6.2 K3
+G6.2 K3
+"""
+G5_2 = PREAMBLE + """F1200
+G5.2 P2 L3
+X10 Y20 P1
+X30 Y20 P0.5
+X40 Y0 P1
+X50 Y10 P1
+G5.3
+"""
+
+
+@pytest.mark.parametrize("dialect", ["auto", "linuxcnc"])
+def test_same_curve_as_g06_2_g6_2_and_g5_2(dialect: str) -> None:
+    fanuc = only_curve(G06_2)
+    linuxcnc_g62 = only_curve(G6_2, dialect)
+    linuxcnc_g52 = only_curve(G5_2, dialect)
+    for other in (linuxcnc_g62, linuxcnc_g52):
+        for field in ("knots", "points", "weights"):
+            np.testing.assert_array_equal(getattr(other.curve, field),
+                                          getattr(fanuc.curve, field))
+        np.testing.assert_array_equal(other.feed_mm_s, fanuc.feed_mm_s)
+    assert_curve(fanuc, 2, [0, 0, 0, 1, 2, 3, 3, 3],
+                 [[0, 0, 0], [10, 20, 0], [30, 20, 0], [40, 0, 0], [50, 10, 0]],
+                 [2, 1, 0.5, 1, 1])
+
+
+def test_g6_2_without_q_is_fanuc_in_auto_and_linuxcnc_when_told() -> None:
+    text = PREAMBLE + "G91\nG6.2 P3 K0 X0 Y0 Z0\nK0 X1 Y1\nK0 X1 Y-1\nK1\nK1\nK1\n"
+    assert only_curve(text).incremental  # Fanuc rules accept G91
+    with pytest.raises(InputError, match="G6.2 under G91 is not supported"):
+        read(text, "linuxcnc")
+
+
+def test_unknown_dialect_is_refused_at_the_call() -> None:
+    with pytest.raises(InputError) as caught:
+        read_gcode(Path("t.nc"), "", "heidenhain")
+    assert str(caught.value) == "unknown G-code dialect 'heidenhain' (use auto, fanuc or linuxcnc)"
+
+
+# ---- modal state --------------------------------------------------------------------------------
+def test_fanuc_g91_control_points_are_relative_to_the_previous_one() -> None:
+    block = only_curve("G21 G90 G0 X1 Y2 Z3\nG91\nG06.2 P3 K0 X0 Y0 Z0 F1000\n"
+                       "K0 X1 Y1\nK0 X1 Y-1 Z2\nK1\nK1\nK1\nG1 X1\n")
+    assert_curve(block, 2, [0, 0, 0, 1, 1, 1], [[1, 2, 3], [2, 3, 3], [3, 2, 5]])
+    assert block.incremental
+
+
+def test_linuxcnc_g5_2_g91_points_are_relative_to_the_block_start() -> None:
+    """interp_convert.cc find_ends adds the current position, which moves only at G5.3."""
+    block = only_curve("G21 G90 G0 X1 Y2 Z3\nG91\nG5.2\nX1 Y1 P1\nX2 Y0 P1\nG5.3\n")
+    assert_curve(block, 2, [0, 0, 0, 1, 1, 1], [[1, 2, 3], [2, 3, 3], [3, 2, 3]])
+    assert block.incremental and block.feed_word_after is None
+    assert np.isinf(block.feed_mm_s).all()  # no F was ever programmed
+
+
+@pytest.mark.parametrize("plane, words, points", [
+    ("G18", ["X1 Z1", "X2 Z0"], [[1, 2, 3], [1, 2, 1], [2, 2, 0]]),
+    ("G19", ["Y1 Z1", "Y2 Z0"], [[1, 2, 3], [1, 1, 1], [1, 2, 0]]),
+])
+def test_g5_2_plane_holds_the_third_axis(plane: str, words: list, points: list) -> None:
+    text = f"G21 G90 G0 X1 Y2 Z3\n{plane}\nG5.2\n{words[0]} P1\n{words[1]} P1\nG5.3\n"
+    assert_curve(only_curve(text), 2, [0, 0, 0, 1, 1, 1], points)
+
+
+def test_g5_2_line_with_a_point_keeps_the_start_weight_1_and_f_on_g5_3_wins() -> None:
+    block = only_curve(PREAMBLE + "F500\nG5.2 X10 Y20 P3 L3\nX30 Y20 P1 F800\nX40 Y0 P1\n"
+                                  "G5.3 F900\n")
+    assert_curve(block, 2, [0, 0, 0, 1, 2, 2, 2],
+                 [[0, 0, 0], [10, 20, 0], [30, 20, 0], [40, 0, 0]], [1, 3, 1, 1])
+    np.testing.assert_array_equal(block.feed_mm_s, [15.0])  # F900, in force at G5.3
+    assert block.feed_word_after == "F900"
+
+
+def test_reference_return_and_dwell_between_fanuc_curves_pass_through() -> None:
+    text = (PREAMBLE + "G06.2 P3 K0 X0 Y0 F500\nK0 X1 Y1\nK0 X2 Y0\nK1\nK1\nK1\n"
+            "G04 X1.5\nG06.2 P3 K0 X2 Y0 F500\nK0 X3 Y1\nK0 X4 Y0\nK1\nK1\nK1\n"
+            "G91 G28 Z0.\nG90\n")
+    items = read(text)
+    assert [type(item).__name__[0] for item in items] == list("PPCPCPP")
+    assert items[3] == PassThrough("G04 X1.5\n")  # a dwell: X is a time, the tool stays at X2
+
+
+def test_curve_end_is_the_next_start() -> None:
+    text = (PREAMBLE + "G5.2\nX10 Y10 P1\nX20 Y0 P1\nG5.3\n"
+            "G06.2 P3 K0 X20 Y0 Z0 F900\nK0 X30 Y10\nK0 X40 Y0\nK1\nK1\nK1\n")
+    first, second = curves(read(text))
+    np.testing.assert_array_equal(second.curve.points[0], first.curve.points[-1])
+
+
+@pytest.mark.parametrize("position, first_point, ok", [
+    ("X10.123", "X10.1234", True),  # 3 vs 4 decimals: half a unit of the 3rd, 0.0005
+    ("X10.123", "X10.1236", False),
+    ("X10.5", "X10.549", True),  # 1 decimal: 0.05
+    ("X10.5", "X10.551", False),
+    ("X10.", "X10.0004", True),  # no fractional digits, no precision: the IS-B floor, 0.0005
+    ("X10.", "X10.0006", False),
+])
+def test_first_control_point_tolerance_both_sides(position: str, first_point: str,
+                                                  ok: bool) -> None:
+    text = (f"G21 G90 G0 {position} Y0 Z0\nG06.2 P3 K0 {first_point} Y0 F900\n"
+            "K0 X30 Y10\nK0 X40 Y0\nK1\nK1\nK1\n")
+    if ok:
+        assert only_curve(text).curve.points[0][0] == float(first_point[1:])
+    else:
+        with pytest.raises(InputError, match="Fanuc alarm PS1009"):
+            read(text)
+
+
+def test_unknown_position_skips_the_check_for_programmed_axes() -> None:
+    text = ("G21 G90 G0 X0 Y0 Z5\nG91 G28 Z0\nG90\n"
+            "G06.2 P3 K0 X0 Y0 Z-1 F900\nK0 X10 Y10\nK0 X20 Y0\nK1\nK1\nK1\n")
+    assert only_curve(text).curve.points[0].tolist() == [0, 0, -1]
+    omitted = text.replace("Z-1 F900", "F900")
+    with pytest.raises(InputError, match=r"^t.nc:4:1: Z is unknown here \(after G28 on line 2\)"):
+        read(omitted)
+
+
+@pytest.mark.parametrize("before", [
+    "G0 X25.4 Y0 Z0\nG20\n",  # G20 converts the known position
+    "G20\nG92 X1 Y0 Z0\n",  # G92 sets it
+    "G20\nG0 X0 Y0 Z0\n/G0 X1\n",  # a block-delete line counts as executed
+    "G20\nG54 G0 X1 Y0 Z0\n",  # a move in the block of a frame change sets its axes
+    "G20\nG0 X0.5 Y0 Z0\nG91 G0 X0.5\nG90\n",
+    "G20\nG0 X0 Y0 Z0\nG43 H1 Z0\nG0 X1\n",  # G43 loses Z, its Z word sets it again
+])
+def test_position_tracking(before: str) -> None:
+    text = before + "G06.2 P3 K0 X1. Y0 F40\nK0 X2 Y1\nK0 X3 Y0\nK1\nK1\nK1\n"
+    assert only_curve(text).curve.points[0].tolist() == [1, 0, 0]
+
+
+@pytest.mark.parametrize("before, lost", [
+    ("G0 X1 Y0 Z0\nG10 L2 P1 X5\n", "after G10 on line 3"),
+    ("G0 X1 Y0 Z0\nG68 X0 Y0 R30\n", "after G68 on line 3"),
+    ("G0 X1 Y0 Z0\nG53 G0 Z0\n", "after G53 on line 3"),
+    ("G0 X1 Y0 Z0\nG81 X1 Y0 Z-5 R1 F100\nG80\n", "after canned cycle G81 on line 3"),
+    ("G0 X1 Y0 Z0\nG38.2 Z-10 F100\n", "after probing G38.2 on line 3"),
+    ("G0 X1 Y0 Z0\nG31 Z-10 F100\n", "after G31 on line 3"),
+    ("G0 X1 Y0 Z0\nM98 P100\n", "after M98 on line 3"),
+    ("G0 X1 Y0 Z0\nG200 Z4\n", "after G200 on line 3, a G code nurbsfeed does not interpret"),
+    ("G0 X1 Y0 Z0\nG5.2\nX2 Y1 P1\nX1 Y0 P1\nG5.3\nZ1\n",
+     "after axis words with no motion mode in effect on line 7"),
+])
+def test_what_loses_z(before: str, lost: str) -> None:
+    text = "G21 G90\n" + before + "G06.2 P3 K0 X1 Y0 F40\nK0 X2 Y1\nK0 X3 Y0\nK1\nK1\nK1\n"
+    with pytest.raises(InputError, match=rf"Z is unknown here \({re.escape(lost)}\)"):
+        read(text)
+
+
+def test_feed_from_a_parameter_is_restored_as_its_value() -> None:
+    block = only_curve(PREAMBLE + "#1=1500.\nG06.2 P3 K0 X0 Y0 F#1\nK0 X1 Y1\nK0 X2 Y0\n"
+                                  "K1\nK1\nK1\n")
+    assert block.feed_word_after == "F1500."
+    np.testing.assert_array_equal(block.feed_mm_s, [25.0])
+
+
+def test_feed_in_force_before_the_block_holds_until_a_control_point_changes_it() -> None:
+    block = only_curve(PREAMBLE + "G1 X0 F600\nG06.2 P3 K0 X0 Y0\nK0 X1 Y1\nK0 X2 Y0\n"
+                                  "K0.25 X3 Y1 F1200\nK0.5 X4 Y0 F1200\nK0.75 X5 Y1 F300\n"
+                                  "K1\nK1\nK1\n")
+    np.testing.assert_array_equal(block.feed_u, [0.0, 0.25, 0.75])  # repeated F1200 merged
+    np.testing.assert_array_equal(block.feed_mm_s, [10.0, 20.0, 5.0])
+    assert block.feed_word_after == "F300"
+
+
+def test_comment_lines_inside_a_block_are_part_of_it() -> None:
+    text = PREAMBLE + "G06.2 P3 K0 X0 Y0 F500\n(mid-curve note)\n\nK0 X1 Y1\nK0 X2 Y0\nK1\nK1\nK1\n"
+    items = read(text)
+    assert [type(item).__name__ for item in items] == ["PassThrough"] * 2 + ["CurveBlock"]
+
+
+def test_the_reader_streams() -> None:
+    """Items come out before the rest of the file is read: an error on line 4 comes after."""
+    stream = read_gcode(Path("t.nc"), "G21\nG90\nG0 X0\nG1 X[1]\n")
+    assert next(stream) == PassThrough("G21\n")
+    assert next(stream) == PassThrough("G90\n")
+    assert next(stream) == PassThrough("G0 X0\n")
+    with pytest.raises(InputError, match="^t.nc:4:5: expressions"):
+        next(stream)
+
+
+# ---- declarative bad inputs ---------------------------------------------------------------------
+BAD_FILES = sorted(BAD.glob("*.nc"))
+
+
+def test_there_are_bad_input_cases() -> None:
+    assert len(BAD_FILES) >= 70
+
+
+@pytest.mark.parametrize("path", BAD_FILES, ids=[p.stem for p in BAD_FILES])
+def test_bad_input(path: Path) -> None:
+    text = load(path)
+    lines = text.splitlines()
+    assert lines[0].startswith("; expect: ")
+    expected = lines[0][len("; expect: "):]
+    dialect = lines[1][len("; dialect: "):] if lines[1].startswith("; dialect: ") else "auto"
+    with pytest.raises(InputError) as caught:
+        read(text, dialect, name=str(path))
+    assert str(caught.value) == f"{path}:{expected}"
+
+
+CURVE_ERRORS = {"fanuc-fewer-control-points", "fanuc-knot-decreasing", "fanuc-end-not-clamped",
+                "fanuc-weight-zero", "linuxcnc-g5-2-weight-zero"}
+
+
+@pytest.mark.parametrize("name", sorted(CURVE_ERRORS))
+def test_curve_definition_errors_are_curve_errors(name: str) -> None:
+    path = BAD / f"{name}.nc"
+    with pytest.raises(CurveError):
+        read(load(path), name=str(path))
+
+
+# ---- fuzz: mutated programs fail only with InputError -------------------------------------------
+SAMPLE_TEXTS = [load(p) for p in sorted(SAMPLES.glob("*.n*c"))] + [G06_2, G6_2, G5_2]
+TOKENS = ["K1.", "K0", "K3", "X5.", "Y-2", "Z0", "R0.5", "R0", "P3", "P2", "P1", "Q1", "L4", "F0",
+          "F1000.", "G06.2", "G6.2", "G5.2", "G5.3", "G1", "G0", "G91", "G90", "G41", "G40",
+          "G28", "G93", "G92 X0", "G81", "G80", "G20", "G21", "M6", "#1=2.", "X#1", "(c)", ";",
+          "/", "%", "N5", "G18", "G19", "G17.1", "[", "#", "\r"]
+
+
+@st.composite
+def mutated_programs(draw: st.DrawFn) -> tuple[str, str]:
+    text = draw(st.sampled_from(SAMPLE_TEXTS))
+    rng = random.Random(draw(st.integers(0, 2**32 - 1)))
+    lines = source_lines(text)
+    for _ in range(draw(st.integers(1, 4))):
+        if not lines:
+            break
+        i = rng.randrange(len(lines))
+        kind = rng.randrange(6)
+        if kind == 0:
+            del lines[i]
+        elif kind == 1:
+            lines.insert(i, lines[rng.randrange(len(lines))])
+        elif kind == 2:
+            j = rng.randrange(len(lines))
+            lines[i], lines[j] = lines[j], lines[i]
+        elif kind == 3:
+            pos = rng.randrange(len(lines[i]) + 1)
+            lines[i] = lines[i][:pos] + rng.choice(TOKENS) + " " + lines[i][pos:]
+        elif kind == 4:
+            lines[i] = " ".join(rng.choices(TOKENS, k=rng.randrange(1, 3))) + "\n"
+        else:
+            pos = rng.randrange(max(len(lines[i]) - 1, 1))
+            lines[i] = lines[i][:pos] + rng.choice("0123456789.-+ XKYRFP") + lines[i][pos + 1:]
+    return "".join(lines), draw(st.sampled_from(["auto", "fanuc", "linuxcnc"]))
+
+
+@settings(max_examples=1500, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(mutated_programs())
+def test_mutated_programs_fail_only_with_input_errors(case: tuple[str, str]) -> None:
+    text, dialect = case
+    try:
+        items = read(text, dialect)
+    except InputError as exc:
+        assert exc.location is not None and exc.location.file == "t.nc"
+        return
+    passed = iter(source_lines(text))
+    for item in items:
+        if isinstance(item, PassThrough):
+            assert item.text in passed  # a subsequence of the source lines, in order
+        else:
+            curve = item.curve
+            assert len(curve.knots) == curve.n_ctrl + curve.degree + 1
+            assert item.feed_u[0] == curve.u_min and len(item.feed_u) == len(item.feed_mm_s)
+            assert all(v > 0 for v in item.feed_mm_s) and not any(math.isnan(v)
+                                                                  for v in item.feed_mm_s)
