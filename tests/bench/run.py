@@ -1,0 +1,124 @@
+"""Benchmarks of nurbsfeed (issue 5), printed as a table. Run from the repository root:
+
+    python -m tests.bench.run            # the full set (~1 min)
+    python -m tests.bench.run --quick    # smaller programs, for a smoke run
+
+1. Stepping kernels: microseconds per step for each method on the butterfly with paper-table1
+   (the compiled kernel alone, median of repeated runs after a warm-up).
+2. End to end: `nurbsfeed convert` on generated Fanuc G06.2 programs of hundreds of curves, pinned
+   to one core; output points per second (planning, interpolation and writing included), wall
+   time and the child's peak RSS, for two program sizes (memory must not grow with the output).
+3. Cold start: `nurbsfeed convert` of a small sample with a warm numba cache (median of 5).
+Speed is measured here, never asserted in the test suite.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from nurbsfeed.interpolate import METHODS, SLOW_SPEED_REL, step_curve
+from nurbsfeed.json_reader import read_json_curves
+from nurbsfeed.machine import load_machine
+from nurbsfeed.planning.limits import Limits
+from nurbsfeed.planning.planner import plan_curve
+from tests.bench.programs import fanuc_program
+
+ROOT = Path(__file__).resolve().parents[2]
+REPEATS = 30
+
+
+def kernel_us_per_step() -> dict[str, float]:
+    text = (ROOT / "samples" / "butterfly.json").read_text()
+    _, [(curve, _)] = read_json_curves(ROOT / "samples" / "butterfly.json", text)
+    plan = plan_curve(curve, Limits.from_machine(load_machine("paper-table1")))
+    law = plan.law
+    t = np.arange(plan.n_periods + 1) * (law.duration_s / plan.n_periods)
+    ds = law.increments(t)
+    u = np.empty(ds.size + 1)
+    pts = np.empty((ds.size + 1, 3))
+    slow = SLOW_SPEED_REL * plan.length_mm / (curve.u_max - curve.u_min)
+    result = {}
+    for name, code in METHODS.items():
+        args = (code, curve.knots, curve.homogeneous, curve.degree, curve.n_ctrl, curve.u_min,
+                ds, 1.0, slow, u, pts)
+        step_curve(*args)  # compile / load from cache
+        times = []
+        for _ in range(REPEATS):
+            start = time.perf_counter()
+            step_curve(*args)
+            times.append(time.perf_counter() - start)
+        result[name] = statistics.median(times) / ds.size * 1e6
+    return result
+
+
+def _pin_to_one_core() -> None:
+    os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+
+
+def run_convert(args: list[str]) -> tuple[float, int]:
+    """Wall seconds and peak RSS (KiB) of one `nurbsfeed convert` child process."""
+    start = time.perf_counter()
+    proc = subprocess.Popen([sys.executable, "-m", "nurbsfeed.cli", "convert", *args],
+                            preexec_fn=_pin_to_one_core, stdout=subprocess.DEVNULL)
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - start
+    if os.waitstatus_to_exitcode(status) != 0:
+        raise SystemExit(f"nurbsfeed convert {' '.join(args)} failed")
+    return wall, usage.ru_maxrss
+
+
+def end_to_end(n_curves: int, folder: Path) -> dict[str, float]:
+    src = folder / f"program-{n_curves}.nc"
+    src.write_text(fanuc_program(n_curves))
+    out = folder / f"out-{n_curves}.nc"
+    wall, rss_kib = run_convert([str(src), "-o", str(out), "-q"])
+    points = 0
+    with out.open() as handle:
+        for line in handle:
+            if line.startswith("(nurbsfeed: curve"):
+                points += int(re.search(r", (\d+) points,", line).group(1))
+    out_mb = out.stat().st_size / 1e6
+    out.unlink()
+    return {"curves": n_curves, "points": points, "wall_s": wall, "points_per_s": points / wall,
+            "rss_mb": rss_kib / 1024, "output_mb": out_mb}
+
+
+def cold_start(folder: Path) -> float:
+    out = folder / "cold.nc"
+    sample = str(ROOT / "samples" / "fanuc-quadratic.nc")
+    run_convert([sample, "-o", str(out), "-q"])  # fills the numba cache
+    return statistics.median(run_convert([sample, "-o", str(out), "-q"])[0] for _ in range(5))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="small programs only")
+    sizes = (50, 100) if parser.parse_args().quick else (500, 1000)
+    kernel = kernel_us_per_step()
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        runs = [end_to_end(n, folder) for n in sizes]
+        cold = cold_start(folder)
+    print("| benchmark | result |")
+    print("| --- | --- |")
+    for name, us in kernel.items():
+        print(f"| kernel {name}, butterfly, paper-table1 | {us:.3f} us/step |")
+    for r in runs:
+        print(f"| convert {r['curves']} curves, {r['points']:,} points "
+              f"({r['output_mb']:.0f} MB out) | {r['points_per_s'] / 1e6:.2f} M points/s, "
+              f"{r['wall_s']:.2f} s, peak RSS {r['rss_mb']:.0f} MB |")
+    print(f"| cold start, convert fanuc-quadratic.nc (warm cache) | {cold:.2f} s |")
+
+
+if __name__ == "__main__":
+    main()
