@@ -4,7 +4,7 @@
 - `compare_file`: the paper's Table 2 on any input: per interpolator the feed fluctuation (SPEC §3)
   and the compiled kernel's time per step.
 - `check_files`: verifies a converted program against its source without running the planner;
-  its definitions and tolerances are documented above `check_files`.
+  every definition and tolerance is in the comment that opens the "check" section below.
 - `run_series`: what `nurbsfeed plot` draws for one interpolated curve.
 
 Lengths are in the program's unit ("mm" in names), times in seconds. No printing: `render_*`
@@ -24,8 +24,8 @@ from typing import Any
 
 import numpy as np
 
+from nurbsfeed.errors import InputError, Location
 from nurbsfeed.geometry import NurbsCurve
-from nurbsfeed.geometry.arclength import simpson_lengths
 from nurbsfeed.geometry.kernel import eval_d1, find_span
 from nurbsfeed.geometry.nurbs import curvature_from_derivatives
 from nurbsfeed.interpolate import METHODS, SLOW_SPEED_REL, Interpolation, interpolate, step_curve
@@ -71,7 +71,6 @@ def curve_blocks(path: Path, machine: Machine, dialect: str = "auto") -> list[Cu
 # Wei et al. 2022, Table 2 (butterfly, Table 1 limits, MATLAB): max feed fluctuation in %, and
 # computation time per interpolation step in microseconds.
 PAPER_TABLE2 = {"taylor1": (6.84, 3.9), "rk4": (0.36, 16.1), "rk2c": (0.0281, 11.5)}
-DEFAULT_REPEAT = 25
 
 
 @dataclass(frozen=True)
@@ -124,14 +123,13 @@ def kernel_seconds(plan: Plan, result: Interpolation, repeat: int) -> float:
     times = []
     for _ in range(repeat):
         start = time.perf_counter()
-        step_curve(code, curve.knots, curve.homogeneous, curve.degree, curve.u_min,
-                   result.ds_mm, 1.0, slow, u, pts)
+        step_curve(code, curve.knots, curve.homogeneous, curve.degree, curve.n_ctrl,
+                   curve.u_min, result.ds_mm, 1.0, slow, u, pts)
         times.append(time.perf_counter() - start)
     return statistics.median(times)
 
 
-def compare_file(path: Path, machine: Machine, dialect: str = "auto",
-                 repeat: int = DEFAULT_REPEAT) -> Comparison:
+def compare_file(path: Path, machine: Machine, dialect: str, repeat: int) -> Comparison:
     """Feed fluctuation and time per step of every interpolator on every curve of `path`."""
     plans = [plan_block(block, machine) for block in curve_blocks(path, machine, dialect)]
     moving = [p for p in plans if p.n_periods > 0]
@@ -222,6 +220,30 @@ def chord_errors_mm(curve: NurbsCurve, u0: np.ndarray, u1: np.ndarray, a: np.nda
     return np.maximum(worst, np.maximum(f1, f2))
 
 
+GAUSS_X, GAUSS_W = np.polynomial.legendre.leggauss(5)
+
+
+def arc_length_mm(curve: NurbsCurve, u: np.ndarray) -> np.ndarray:
+    """Arc length from u_min to each u: (N,) -> (N,), u in any order.
+
+    5-point Gauss-Legendre on the intervals between the sorted parameters and the knots (so that
+    no interval holds a knot, where |C'| may jump): exact to rounding on steps this short.
+    """
+    nodes = np.unique(np.concatenate([np.asarray(u, dtype=float), curve.span_breaks]))
+    half = 0.5 * np.diff(nodes)
+    mid = 0.5 * (nodes[:-1] + nodes[1:])
+    speed = curve.speed((mid[:, None] + half[:, None] * GAUSS_X[None, :]).ravel())
+    lengths = half * (speed.reshape(mid.size, GAUSS_X.size) @ GAUSS_W)
+    cumulative = np.concatenate([[0.0], np.cumsum(lengths)])
+    return cumulative[np.searchsorted(nodes, u)] - cumulative[np.searchsorted(nodes,
+                                                                              curve.u_min)]
+
+
+def curve_length_mm(curve: NurbsCurve) -> float:
+    """The whole curve's arc length."""
+    return float(arc_length_mm(curve, np.array([curve.u_max]))[0])
+
+
 def curvature_1_mm(curve: NurbsCurve, u: np.ndarray) -> np.ndarray:
     """kappa at u: (N,) -> (N,); 0 where C'(u) = 0 (a repeated control point)."""
     _, c1, c2 = curve.derivatives(u)
@@ -237,6 +259,7 @@ class RunSeries:
     t_s: np.ndarray  # (N+1,) time of each point
     t_mid_s: np.ndarray  # (N,) mid-time of each step
     planned_v_mm_s: np.ndarray  # (N+1,) feed of the time law
+    feed_cap_mm_s: np.ndarray  # (N+1,) v_m: min(machine max feed, programmed feed) at the point
     chord_v_mm_s: np.ndarray  # (N,) |P_k+1 - P_k| / T
     tangential_acc_mm_s2: np.ndarray  # (N+1,)
     normal_acc_mm_s2: np.ndarray  # (N+1,) v^2 kappa
@@ -248,9 +271,10 @@ class RunSeries:
     key_kind: np.ndarray  # (K,)
 
 
-def run_series(plan: Plan, result: Interpolation) -> RunSeries:
+def run_series(block: CurveBlock, plan: Plan, result: Interpolation) -> RunSeries:
     """The series of the paper's figures 9-13 for one curve and one interpolator."""
     curve = plan.curve
+    cap = np.minimum(plan.limits.feed_mm_s, feed_at(result.u, block.feed_u, block.feed_mm_s))
     kappa = curvature_1_mm(curve, result.u)
     v = result.v_mm_s
     chord = np.linalg.norm(np.diff(result.points, axis=0), axis=1)
@@ -258,10 +282,25 @@ def run_series(plan: Plan, result: Interpolation) -> RunSeries:
         ff = np.where(result.ds_mm > 0.0, np.abs(chord - result.ds_mm) / result.ds_mm, np.nan)
     err = chord_errors_mm(curve, result.u[:-1], result.u[1:], result.points[:-1],
                           result.points[1:])
-    return RunSeries(result.t_s, 0.5 * (result.t_s[:-1] + result.t_s[1:]), v,
+    return RunSeries(result.t_s, 0.5 * (result.t_s[:-1] + result.t_s[1:]), v, cap,
                      chord / result.period_s, result.a_mm_s2, v**2 * kappa,
                      np.asarray(result.j_mm_s3, dtype=float), v**3 * kappa**2, err, 100.0 * ff,
                      curve.point(plan.key_u), np.asarray(plan.key_kind))
+
+
+def curve_run(path: Path, machine: Machine, method: str, dialect: str,
+              index: int) -> tuple[CurveBlock, Plan, Interpolation]:
+    """Plan and interpolate curve `index` (from 0, in file order) of `path`: what `plot` draws."""
+    blocks = curve_blocks(path, machine, dialect)
+    if index >= len(blocks):
+        raise InputError(f"there is no curve {index}: the input has {len(blocks)} NURBS curve(s), "
+                         "numbered from 0", Location(str(path)))
+    block = blocks[index]
+    plan = plan_block(block, machine)
+    if plan.n_periods == 0:
+        raise InputError(f"curve {index} ({block.curve.name}) has zero length: nothing to plot",
+                         block.location)
+    return block, plan, interpolate(plan, method)
 
 
 # ---- check: a converted program against its source ----------------------------------------------
@@ -290,7 +329,8 @@ def run_series(plan: Plan, result: Interpolation) -> RunSeries:
 #   skipped periods  n > 1 only where points rounded onto the previous one were dropped: two such
 #                    points are <= 2r apart and a step grows by at most A_t T^2 per period (its
 #                    second difference is a mean of a), so |dP^| <= 4r + A_t T^2.
-#   period total     the moves' periods add up to the comment's point count - 1.
+#   period total     the moves' periods add up to at most the comment's point count - 1; fewer
+#                    when the last points round onto the end point and are not written (a note).
 #   feed             (s_i+1 - s_i) / (t_i+1 - t_i), the mean speed over the move (never above the
 #                    true maximum), <= v_m(u) + (e_i + e_i+1) / dt.
 #   tangential a, j  2 f[t0, t1, t2] and 6 f[t0, t1, t2, t3], divided differences of s(t) on
@@ -307,7 +347,8 @@ def run_series(plan: Plan, result: Interpolation) -> RunSeries:
 #   structure        every non-NURBS source line present, byte-identical and in order; every curve
 #                    once; every X/Y/Z/F value with a decimal point, no negative zero, no F0, no
 #                    zero-length move, F on the first move; G90 ... G91 around the moves of a G91
-#                    block and its F restored; the last point is the curve end (within r). The
+#                    block and its F restored; moves for every curve that has a length; the last
+#                    point is the curve end (within r). The
 #                    first point is the position before the block, the curve start (the readers
 #                    require it; JSON programs rapid there), taken as written at d decimals.
 
@@ -315,7 +356,6 @@ SEGMENT_TIME_REL_TOL = 0.005
 NOISE_SHARE = 0.1
 ANCHOR_ROUNDINGS = 10.0
 NUMERIC_REL_TOL = 1e-6  # float slack on the exact bounds (coordinates carry ~1e-16 relative error)
-ARC_TOL_ROUNDINGS = 1e-6  # arc-length quadrature tolerance per move, in units of r
 PROJECT_ITERATIONS = 100
 PROJECT_SEED_REL = 1e-9  # first bracket step (of the knot range) where |C'| = 0
 SHOWN_PER_CHECK = 5
@@ -352,9 +392,9 @@ CHECKS: dict[str, tuple[str, str, str]] = {
     "normal-jerk": ("normal jerk v^3 kappa^2", "mm/s^3",
                     "normal jerk {value:.6g} mm/s^3 > {limit:.6g} + {allowance:.3g} mm/s^3"),
 }
-STRUCTURE_CHECKS = ("pass-through", "curve-missing", "curve-extra", "comment", "end-point",
-                    "period-total", "decimal-point", "negative-zero", "zero-feed", "zero-length",
-                    "feed-word", "mode-restore")
+STRUCTURE_CHECKS = ("pass-through", "curve-missing", "curve-extra", "comment", "no-moves",
+                    "end-point", "period-total", "decimal-point", "number", "negative-zero",
+                    "zero-feed", "zero-length", "feed-word", "g90-g91", "feed-restore")
 
 
 @dataclass(frozen=True)
@@ -388,18 +428,28 @@ class Measure:
 
 
 @dataclass(frozen=True)
+class Estimation:
+    """How one curve's kinematics were estimated (lengths in mm)."""
+
+    curve: int
+    rounding_mm: float  # r
+    acc_baseline_s: float  # h for the tangential acceleration
+    jerk_baseline_s: float  # h for the tangential jerk
+
+
+@dataclass(frozen=True)
 class CheckReport:
     source: str
     output: str
     n_curves: int
     n_moves: int
     n_pass_through: int
-    acc_baseline_s: float
-    jerk_baseline_s: float
-    rounding_mm: float
+    estimation: tuple[Estimation, ...]
     measures: tuple[Measure, ...]
+    structure: dict[str, int]  # violations of each of STRUCTURE_CHECKS
     violations: tuple[Violation, ...]  # at most SHOWN_PER_CHECK per check
     n_violations: int  # all of them
+    notes: tuple[str, ...]
 
     @property
     def ok(self) -> bool:
@@ -409,11 +459,11 @@ class CheckReport:
         return {"source": self.source, "output": self.output, "ok": self.ok,
                 "curves": self.n_curves, "moves": self.n_moves,
                 "pass_through_lines": self.n_pass_through, "units": "mm, s",
-                "rounding_mm": self.rounding_mm, "acc_baseline_s": self.acc_baseline_s,
-                "jerk_baseline_s": self.jerk_baseline_s,
+                "estimation": [vars(e) for e in self.estimation],
                 "checks": [dict(vars(m), ratio=m.ratio) for m in self.measures],
+                "structure": self.structure,
                 "violation_count": self.n_violations,
-                "violations": [vars(v) for v in self.violations]}
+                "violations": [vars(v) for v in self.violations], "notes": list(self.notes)}
 
 
 @jit
@@ -542,6 +592,7 @@ class _Findings:
     output: str
     violations: list[Violation] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    estimation: list[Estimation] = field(default_factory=list)
     arrays: dict[str, list[tuple[np.ndarray, ...]]] = field(default_factory=dict)
 
     def add(self, check: str, line: int, message: str) -> None:
@@ -576,7 +627,7 @@ def _check_words(section: _Section, findings: _Findings) -> tuple[np.ndarray, np
             try:
                 number = float(value)
             except ValueError:
-                findings.add("decimal-point", line, f"{letter}{value} is not a number")
+                findings.add("number", line, f"{letter}{value} is not a number")
                 continue
             if number == 0.0 and value.startswith("-"):
                 findings.add("negative-zero", line, f"{letter}{value} is a negative zero "
@@ -622,8 +673,8 @@ def _baseline_s(period_s: float, order: int, noise_mm: float, limit: float) -> f
 
 
 def _check_section(section: _Section, block: CurveBlock, machine: Machine,
-                   findings: _Findings) -> tuple[float, float, float]:
-    """Geometry, timing and kinematics of one curve's moves; returns (h_a, h_j, r) used."""
+                   findings: _Findings) -> None:
+    """Geometry, timing and kinematics of one curve's moves."""
     units_machine = machine.in_program_units(block.units)
     lim = Limits.from_machine(units_machine)
     curve = block.curve
@@ -632,20 +683,17 @@ def _check_section(section: _Section, block: CurveBlock, machine: Machine,
     r = 0.5 * 10.0**-units_machine.decimals * math.sqrt(3.0)
     h_a = _baseline_s(period, 2, r, lim.acc_mm_s2)
     h_j = _baseline_s(period, 3, r, lim.jerk_mm_s3)
+    findings.estimation.append(Estimation(section.index, r * scale, h_a, h_j))
     if abs(section.period_ms * 1e-3 - period) > 1e-9 * period:
         findings.add("comment", section.comment_line,
                      f"the comment announces a {section.period_ms:g} ms period, the machine "
                      f"profile has {period * 1e3:g} ms: check with the profile used to convert")
-    if section.zero_length:
-        length = float(np.sum(np.linalg.norm(np.diff(curve.point(
-            np.linspace(curve.u_min, curve.u_max, 65)), axis=0), axis=1)))
+    if section.zero_length or not section.moves:
+        length = curve_length_mm(curve)
         if length > r:
-            findings.add("end-point", section.comment_line,
+            findings.add("no-moves", section.comment_line,
                          f"no move written but the curve is {length * scale:.4g} mm long")
-        return h_a, h_j, r
-    if not section.moves:
-        findings.add("end-point", section.comment_line, "no move written for this curve")
-        return h_a, h_j, r
+        return
 
     axes, feed_words, lines = _check_words(section, findings)
     if np.isnan(feed_words[0]):
@@ -708,13 +756,10 @@ def _check_section(section: _Section, block: CurveBlock, machine: Machine,
     # ---- kinematics on the projected arc lengths of the points that lie on the curve ----
     ug, tg, pl = u[good], t_s[good], point_lines[good]
     if ug.size < 2:
-        return h_a, h_j, r
+        return
     kappa = curvature_1_mm(curve, ug)
     e = r * (1.0 + kappa * r)
-    arc = simpson_lengths(curve.speed, ug[:-1], ug[1:], np.full(ug.size - 1,
-                                                                ARC_TOL_ROUNDINGS * r))
-    arc = np.where(ug[1:] >= ug[:-1], arc, -arc)
-    s = np.concatenate([[0.0], np.cumsum(arc)])
+    s = arc_length_mm(curve, ug)
     dt = np.diff(tg)
     v_move = np.diff(s) / dt
     cap = np.maximum(feed_at(ug[:-1], block.feed_u, block.feed_mm_s),
@@ -744,7 +789,6 @@ def _check_section(section: _Section, block: CurveBlock, machine: Machine,
                      ((v + e_v) ** 2 - v**2) * k_low * (1.0 + NUMERIC_REL_TOL), pl, scale)
     findings.measure("normal-jerk", v**3 * k_low**2, lim.normal_jerk_mm_s3,
                      ((v + e_v) ** 3 - v**3) * k_low**2 * (1.0 + NUMERIC_REL_TOL), pl, scale)
-    return h_a, h_j, r
 
 
 def _xyz(p: np.ndarray) -> str:
@@ -790,8 +834,8 @@ def _parse_section(lines: list[str], i: int, section: _Section, block: CurveBloc
         if i < len(lines) and _body(lines[i]) == "G90":
             i += 1
         else:
-            findings.add("mode-restore", i + 1, "the moves of a G91 block must start with a G90 "
-                         "line (they are absolute)")
+            findings.add("g90-g91", i + 1, "the moves of a G91 block must be bracketed by G90 "
+                         "and G91 lines (the moves are absolute)")
     first = i
     while i < len(lines) and MOVE_LINE_RE.fullmatch(_body(lines[i])):
         i += 1
@@ -808,13 +852,13 @@ def _parse_section(lines: list[str], i: int, section: _Section, block: CurveBloc
         if i < len(lines) and _body(lines[i]) == "G91":
             i += 1
         else:
-            findings.add("mode-restore", i + 1, "the moves of a G91 block must end with a G91 "
-                         "line (the program continues incremental)")
+            findings.add("g90-g91", i + 1, "the moves of a G91 block must be bracketed by G90 "
+                         "and G91 lines (the moves are absolute)")
     if restore is not None:
         if i < len(lines) and lines[i] == restore:
             i += 1
         else:
-            findings.add("mode-restore", i + 1, f"the program's feed must be restored after the "
+            findings.add("feed-restore", i + 1, f"the program's feed must be restored after the "
                          f"moves with the line {restore.strip()!r}")
     return i
 
@@ -889,40 +933,48 @@ def check_files(source: Path, output: Path, machine: Machine,
     findings = _Findings(str(output))
     out_tokens, token_lines, sections = _parse_output(out_lines, blocks, following, findings)
     _compare_structure(src_tokens, out_tokens, token_lines, blocks, len(out_lines), findings)
-    baselines = (0.0, 0.0, 0.0)
     for section in sections:
         if section.index < len(blocks):
-            baselines = _check_section(section, blocks[section.index], machine, findings)
+            _check_section(section, blocks[section.index], machine, findings)
+    structural = findings.violations
+    shown = _first_per_check(structural)
     measures = []
-    for name, (title, unit, template) in CHECKS.items():
-        parts = findings.arrays.get(name, [])
-        value, limit, allowance, line = (np.concatenate([p[q] for p in parts]) if parts
-                                         else np.zeros(0) for q in range(4))
-        if value.size == 0:
-            measures.append(Measure(name, title, unit, 0, 0, 0.0, 0.0, 0.0, "-"))
-            continue
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = np.where(limit + allowance > 0, value / (limit + allowance),
-                             np.where(value > 0, np.inf, 0.0))
-        bad = np.flatnonzero(~(ratio <= 1.0))
-        for k in bad[:SHOWN_PER_CHECK]:
-            findings.add(name, int(line[k]), template.format(value=value[k], limit=limit[k],
-                                                             allowance=allowance[k]))
-        w = int(np.nanargmax(np.where(np.isnan(ratio), np.inf, ratio)))
-        measures.append(Measure(name, title, unit, int(value.size), int(bad.size),
-                                float(value[w]), float(limit[w]), float(allowance[w]),
-                                f"{output}:{int(line[w])}"))
-    counted = sum(m.n_violations for m in measures)
-    structural = [v for v in findings.violations if v.check not in CHECKS]
-    shown = _limit_per_check(structural) + [v for v in findings.violations if v.check in CHECKS]
-    h_a, h_j, r = baselines
+    for name in CHECKS:
+        measure, listed = _reduce(name, findings.arrays.get(name, []), str(output))
+        measures.append(measure)
+        shown += listed
+    shown.sort(key=lambda v: int(v.where.rsplit(":", 1)[1]))
+    structure = {name: sum(1 for v in structural if v.check == name)
+                 for name in STRUCTURE_CHECKS}
     return CheckReport(str(source), str(output), len(blocks),
                        sum(len(s.moves) for s in sections),
-                       sum(1 for t in src_tokens if t[0] == "line"), h_a, h_j, r,
-                       tuple(measures), tuple(shown), counted + len(structural))
+                       sum(1 for t in src_tokens if t[0] == "line"), tuple(findings.estimation),
+                       tuple(measures), structure, tuple(shown),
+                       len(structural) + sum(m.n_violations for m in measures),
+                       tuple(findings.notes))
 
 
-def _limit_per_check(violations: list[Violation]) -> list[Violation]:
+def _reduce(name: str, parts: list[tuple[np.ndarray, ...]],
+            output: str) -> tuple[Measure, list[Violation]]:
+    """One check's arrays over all curves -> its Measure and its first violations."""
+    title, unit, template = CHECKS[name]
+    if not parts:
+        return Measure(name, title, unit, 0, 0, 0.0, 0.0, 0.0, "-"), []
+    value, limit, allowance, line = (np.concatenate([p[q] for p in parts]) for q in range(4))
+    total = limit + allowance
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(total > 0, value / total, np.where(value > 0, np.inf, 0.0))
+    ratio = np.where(np.isnan(ratio), np.inf, ratio)
+    bad = np.flatnonzero(ratio > 1.0)
+    listed = [Violation(name, f"{output}:{int(line[k])}",
+                        template.format(value=value[k], limit=limit[k], allowance=allowance[k]))
+              for k in bad[:SHOWN_PER_CHECK]]
+    w = int(np.argmax(ratio))
+    return Measure(name, title, unit, int(value.size), int(bad.size), float(value[w]),
+                   float(limit[w]), float(allowance[w]), f"{output}:{int(line[w])}"), listed
+
+
+def _first_per_check(violations: list[Violation]) -> list[Violation]:
     seen: dict[str, int] = {}
     kept = []
     for v in violations:
@@ -932,30 +984,33 @@ def _limit_per_check(violations: list[Violation]) -> list[Violation]:
     return kept
 
 
-def render_check(report: CheckReport) -> str:
-    """The check as a table, the violations listed after it."""
-    lines = [f"check {report.output} against {report.source}: {report.n_curves} curve(s), "
-             f"{report.n_moves:,} moves, {report.n_pass_through} pass-through lines "
-             "(values in mm and s)",
-             f"{'check':<32} {'worst':>12} {'limit':>12} {'allowance':>11} {'ratio':>7} "
-             f"{'points':>8} {'broken':>7}  where"]
+def render_check(report: CheckReport, machine_name: str) -> str:
+    """The check as a table, then how the kinematics were estimated, then the violations."""
+    lines = [f"check {report.output} against {report.source} (machine {machine_name}): "
+             f"{report.n_curves} curve(s), {report.n_moves:,} moves, {report.n_pass_through} "
+             "pass-through lines",
+             f"{'check':<31} {'unit':<7} {'worst':>11} {'limit':>11} {'allowance':>10} "
+             f"{'ratio':>7} {'points':>8} {'broken':>6}  worst at"]
     for m in report.measures:
         if m.n_checked == 0:
-            lines.append(f"{m.title:<32} {'-':>12} {'':>12} {'':>11} {'':>7} {0:>8} {0:>7}")
+            lines.append(f"{m.title:<31} {m.unit:<7} {'-':>11} {'-':>11} {'-':>10} {'-':>7} "
+                         f"{0:>8} {0:>6}")
             continue
-        lines.append(f"{m.title:<32} {m.worst:>12.6g} {m.limit:>12.6g} {m.allowance:>11.3g} "
-                     f"{m.ratio:>7.4f} {m.n_checked:>8} {m.n_violations:>7}  {m.where}")
-    structural = sum(1 for v in report.violations if v.check not in CHECKS)
-    lines.append(f"structure (lines, curves, numbers, ends, modes): "
-                 f"{'ok' if structural == 0 else 'BROKEN'}")
-    lines.append(f"units: {', '.join(f'{CHECKS[m.name][0]} {m.unit}' for m in report.measures[:2])}"
-                 f"; rounding r = {report.rounding_mm:.4g}; tangential a and j from divided "
-                 f"differences of the projected arc length over {report.acc_baseline_s * 1e3:g} ms "
-                 f"and {report.jerk_baseline_s * 1e3:g} ms, allowance = their rounding-noise bound")
-    for v in report.violations:
-        lines.append(str(v))
+        lines.append(f"{m.title:<31} {m.unit:<7} {m.worst:>11.5g} {m.limit:>11.5g} "
+                     f"{m.allowance:>10.3g} {m.ratio:>7.4f} {m.n_checked:>8} "
+                     f"{m.n_violations:>6}  {m.where}")
+    broken = [f"{name} ({count})" for name, count in report.structure.items() if count]
+    lines.append("source lines, curves, number format, curve ends, G90/G91 and F restore: "
+                 + ("ok" if not broken else "BROKEN: " + ", ".join(broken)))
+    for r_mm, h_a, h_j in sorted({(e.rounding_mm, e.acc_baseline_s, e.jerk_baseline_s)
+                                  for e in report.estimation}):
+        lines.append(f"ratio = worst / (limit + allowance); output rounding r = {r_mm:.3g} mm; "
+                     f"tangential a, j: divided differences of the projected arc length over "
+                     f"{h_a * 1e3:g} ms, {h_j * 1e3:g} ms; allowance: their rounding-noise bound")
+    lines += [f"note: {note}" for note in report.notes]
+    lines += [str(v) for v in report.violations]
     hidden = report.n_violations - len(report.violations)
     if hidden > 0:
-        lines.append(f"... and {hidden} more violations of the same checks")
-    lines.append(f"result: {'OK' if report.ok else 'FAILED'} ({report.n_violations} violations)")
+        lines.append(f"... and {hidden} more")
+    lines.append(f"result: {'OK' if report.ok else 'FAILED'}: {report.n_violations} violation(s)")
     return "\n".join(lines)

@@ -23,6 +23,9 @@ from nurbsfeed.errors import EXIT_BAD_INPUT, NurbsfeedError
 from nurbsfeed.machine import FLOAT_KEYS, INT_KEYS, Machine, load_machine
 from nurbsfeed.interpolate import METHODS
 
+TAYLOR1_WARNING = ("nurbsfeed: warning: taylor1 is the paper's first-order baseline; its points "
+                   "drift off the planned feed by up to a few percent, which can break the "
+                   "limits (use rk2c to machine)")
 GCODE_SUFFIXES = (".nc", ".ngc", ".gcode", ".tap", ".cnc", ".txt", ".json", ".mpf", ".eia")
 
 
@@ -172,6 +175,8 @@ def convert(inputs: tuple[str, ...], output: Path | None, method: str, dialect: 
         output.mkdir(parents=True, exist_ok=True)
     targets = [output / output_name(s) if many and output else output for s in sources]
     progress = sys.stderr.isatty() and not quiet
+    if method == "taylor1":
+        click.echo(TAYLOR1_WARNING, err=True)
     if jobs > 1 and len(sources) > 1:
         with ProcessPoolExecutor(max_workers=jobs) as pool:
             results = list(pool.map(_convert_one, sources, targets,
@@ -270,6 +275,79 @@ def plan(input: Path, dialect: str, **kwargs: Any) -> None:
         index += 1
     if index == 0:
         click.echo("no NURBS curves in the input")
+
+
+
+# ---- compare, check, plot --------------------------------------------------------------------
+
+PLOT_NEEDS_MATPLOTLIB = "nurbsfeed plot needs matplotlib: pip install 'nurbsfeed[plot]'"
+
+
+@main.command()
+@click.argument("input", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@machine_options
+@dialect_option
+@click.option("--repeat", type=click.IntRange(1, 100_000), default=25, show_default=True,
+              help="Timed kernel runs per method and curve after the compile; the median counts.")
+@click.option("--json", "as_json", is_flag=True, help="Print the table as JSON.")
+@reports_errors
+def compare(input: Path, dialect: str, repeat: int, as_json: bool, **kwargs: Any) -> None:
+    """The paper's Table 2 on any input: feed fluctuation and time per step of each method."""
+    import json
+
+    from nurbsfeed.analysis import compare_file, render_comparison
+
+    name = kwargs["machine"]
+    result = compare_file(input, machine_from(kwargs), dialect, repeat)
+    click.echo(json.dumps(dict(result.as_dict(), machine=name), indent=2) if as_json
+               else render_comparison(result, name))
+
+
+@main.command()
+@click.argument("source", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.argument("output", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@machine_options
+@dialect_option
+@click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
+@reports_errors
+def check(source: Path, output: Path, dialect: str, as_json: bool, **kwargs: Any) -> None:
+    """Verify a converted program against its source: exit 1 when a limit is broken."""
+    import json
+
+    from nurbsfeed.analysis import check_files, render_check
+    from nurbsfeed.errors import EXIT_OK, EXIT_VIOLATION
+
+    name = kwargs["machine"]
+    report = check_files(source, output, machine_from(kwargs), dialect)
+    click.echo(json.dumps(dict(report.as_dict(), machine=name), indent=2) if as_json
+               else render_check(report, name))
+    sys.exit(EXIT_OK if report.ok else EXIT_VIOLATION)
+
+
+@main.command()
+@click.argument("input", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="The PNG to write.")
+@click.option("--curve", "curve_index", type=click.IntRange(0), default=0, show_default=True,
+              help="Which curve of the input (from 0, in file order).")
+@machine_options
+@method_option
+@dialect_option
+@reports_errors
+def plot(input: Path, output: Path, curve_index: int, method: str, dialect: str,
+         **kwargs: Any) -> None:
+    """The paper's figures for one curve: path, feed, accelerations, jerks, chord error, FF."""
+    try:
+        from nurbsfeed import plotting
+    except ImportError:
+        click.echo(PLOT_NEEDS_MATPLOTLIB, err=True)
+        sys.exit(EXIT_BAD_INPUT)
+    from nurbsfeed.analysis import curve_run, run_series
+
+    name = kwargs["machine"]
+    block, plan, result = curve_run(input, machine_from(kwargs), method, dialect, curve_index)
+    plotting.plot_run(output, plan, result, run_series(block, plan, result), block.units,
+                      name)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -142,6 +142,16 @@ def convert_block(block: CurveBlock, index: int, out: BinaryIO, machine: Machine
                        plan.length_mm, plan.cycle_time_s, block.units)
 
 
+def _umask_mode() -> int:
+    """0666 less the process umask: the mode `open()` would give a new file."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+_CREATE_MODE = _umask_mode()
+
+
 @contextlib.contextmanager
 def atomic_output(path: Path | None) -> Iterator[BinaryIO]:
     """A binary stream that becomes `path` only if the block completes; None: a temp file the
@@ -157,6 +167,7 @@ def atomic_output(path: Path | None) -> Iterator[BinaryIO]:
             if path is not None:
                 os.fsync(handle.fileno())
         if path is not None:
+            os.chmod(handle.name, _CREATE_MODE)  # a temp file is 0600; a new file is not
             os.replace(handle.name, path)
         else:
             os.unlink(handle.name)

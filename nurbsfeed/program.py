@@ -37,6 +37,7 @@ class CurveBlock:
     eol: str = "\n"  # line ending for the lines written in place of the block
     incremental: bool = False  # G91 in effect: the moves are bracketed by G90 ... G91
     feed_word_after: str | None = None  # F word to restore after the moves, e.g. "F1200."
+    # (always with a decimal point: it is written by us)
     feed_u: np.ndarray = field(default_factory=lambda: np.empty(0))
     feed_mm_s: np.ndarray = field(default_factory=lambda: np.empty(0))
 

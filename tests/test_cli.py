@@ -242,3 +242,13 @@ def test_jit_and_plain_python_kernels_write_identical_programs(tmp_path: Path) -
         outputs.append((out.read_bytes(), np.loadtxt(trace, delimiter=",", skiprows=1)))
     assert outputs[0][0] == outputs[1][0]
     assert np.allclose(outputs[0][1], outputs[1][1], rtol=1e-12, atol=1e-12)
+
+
+def test_taylor1_conversions_warn_that_they_can_break_the_limits(tmp_path: Path) -> None:
+    out = tmp_path / "t.nc"
+    code, _, stderr = run("convert", str(SAMPLES / "quarter-circle.json"), "--method", "taylor1",
+                          "-o", str(out), "-q")
+    assert code == 0 and out.exists()
+    assert stderr.startswith("nurbsfeed: warning: taylor1 is the paper's first-order baseline")
+    code, _, stderr = run("convert", str(SAMPLES / "quarter-circle.json"), "-o", str(out), "-q")
+    assert stderr == ""

@@ -66,7 +66,7 @@ def test_linuxcnc_docs_example() -> None:
     assert_curve(block, 2, [0, 0, 0, 1, 2, 3, 3, 3],
                  [[0, 0, z], [0, 1, z], [2, 2, z], [2, 0, z], [0, 0, z]], [1, 1, 1, 1, 2])
     assert (str(block.location), block.units, block.eol) == ("linuxcnc-docs.ngc:13:1", "in", "\n")
-    assert block.feed_word_after == "F60"
+    assert block.feed_word_after == "F60."
     np.testing.assert_array_equal(block.feed_mm_s, [1.0])  # F60 in/min = 1 in/s
 
 
@@ -121,7 +121,7 @@ def test_linuxcnc_g62_with_q_and_g62_knot_lines() -> None:
     (block,) = curves(read(load(SAMPLES / "linuxcnc-g62.ngc")))
     assert_curve(block, 3, [0, 0, 0, 0, 1, 1, 1, 1],
                  [[0, 0, -1], [10, 30, -1], [40, 30, -1], [50, 0, -1]])
-    assert block.feed_word_after == "F2500"
+    assert block.feed_word_after == "F2500."
 
 
 def test_inch_program_keeps_inches() -> None:
@@ -254,7 +254,7 @@ def test_g5_2_line_with_a_point_keeps_the_start_weight_1_and_f_on_g5_3_wins() ->
     assert_curve(block, 2, [0, 0, 0, 1, 2, 2, 2],
                  [[0, 0, 0], [10, 20, 0], [30, 20, 0], [40, 0, 0]], [1, 3, 1, 1])
     np.testing.assert_array_equal(block.feed_mm_s, [15.0])  # F900, in force at G5.3
-    assert block.feed_word_after == "F900"
+    assert block.feed_word_after == "F900."
 
 
 def test_reference_return_and_dwell_between_fanuc_curves_pass_through() -> None:
@@ -345,7 +345,7 @@ def test_feed_in_force_before_the_block_holds_until_a_control_point_changes_it()
                                   "K1\nK1\nK1\n")
     np.testing.assert_array_equal(block.feed_u, [0.0, 0.25, 0.75])  # repeated F1200 merged
     np.testing.assert_array_equal(block.feed_mm_s, [10.0, 20.0, 5.0])
-    assert block.feed_word_after == "F300"
+    assert block.feed_word_after == "F300."
 
 
 def test_comment_lines_inside_a_block_are_part_of_it() -> None:

@@ -169,8 +169,10 @@ class ModalState:
         """A new modal F; F must not be negative (F0 is legal on rapid-only programs)."""
         if word.value < 0:
             raise InputError(f"{word.name}: a feed must not be negative", self.where(word))
-        text = word.name if not word.text.lstrip("+-").startswith("#") else \
-            "F" + format_value(word.value)
+        # restored after our moves, so written our way: with a decimal point (F60 -> F60.),
+        # a parameter as its value; a value already written with a point is kept as written
+        plain = "." in word.text and "#" not in word.text
+        text = word.name if plain else "F" + format_value(word.value)
         self.feed = FeedWord(word.value, text)
         return self.feed
 

@@ -1,0 +1,129 @@
+"""compare, check and plot as a user meets them: key lines of the output and exact exit codes."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+import nurbsfeed
+from nurbsfeed.cli import main
+from tests.conftest import SAMPLES
+
+BUTTERFLY = str(SAMPLES / "butterfly.json")
+
+
+def run(*args: str) -> tuple[int, str, str]:
+    result = CliRunner().invoke(main, list(args), catch_exceptions=False)
+    return result.exit_code, result.stdout, result.stderr
+
+
+@pytest.fixture(scope="module")
+def butterfly_nc(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("cli") / "butterfly.nc"
+    assert run("convert", BUTTERFLY, "-m", "paper-table1", "-o", str(out), "-q")[0] == 0
+    return out
+
+
+def test_compare_prints_table_2_with_the_paper_alongside() -> None:
+    code, stdout, _ = run("compare", BUTTERFLY, "-m", "paper-table1", "--repeat", "2")
+    assert code == 0
+    lines = stdout.splitlines()
+    assert lines[0] == f"{BUTTERFLY}: 1 curve(s), machine paper-table1"
+    assert lines[1].split() == ["method", "max", "FF", "%", "mean", "FF", "%", "points",
+                                "us/step", "paper", "max", "FF", "%", "paper", "us/step"]
+    rows = {line.split()[0]: line.split() for line in lines[2:5]}
+    assert list(rows) == ["taylor1", "rk4", "rk2c"]
+    assert [rows[m][-2:] for m in rows] == [["6.84", "3.9"], ["0.36", "16.1"], ["0.0281", "11.5"]]
+    max_ff = [float(rows[m][1]) for m in rows]
+    assert max_ff[0] > max_ff[1] > max_ff[2]
+    assert "median of 2 compiled kernel runs" in stdout
+    assert "aggregated" not in stdout
+
+
+def test_compare_json_and_multi_curve_aggregation() -> None:
+    code, stdout, _ = run("compare", str(SAMPLES / "fanuc-multi-curve.nc"), "--repeat", "1",
+                          "--json")
+    assert code == 0
+    data = json.loads(stdout)
+    assert data["curves"] == 3 and data["machine"] == "default" and data["repeat"] == 1
+    assert data["aggregate"].startswith("max: largest per-curve maximum; mean: over every period")
+    assert [m["method"] for m in data["methods"]] == ["taylor1", "rk4", "rk2c"]
+    assert {"max_ff_pct", "mean_ff_pct", "n_points", "us_per_step"} <= set(data["methods"][0])
+
+
+def test_check_passes_a_correct_conversion(butterfly_nc: Path) -> None:
+    code, stdout, _ = run("check", BUTTERFLY, str(butterfly_nc), "-m", "paper-table1")
+    assert code == 0
+    lines = stdout.splitlines()
+    assert lines[0].startswith(f"check {butterfly_nc} against {BUTTERFLY} (machine "
+                               "paper-table1): 1 curve(s), ")
+    titles = [line[:31].strip() for line in lines[2:11]]
+    assert titles == ["path deviation", "chord error", "segment time off whole periods",
+                      "multi-period move length", "feed", "tangential acceleration",
+                      "tangential jerk", "normal acceleration v^2 kappa",
+                      "normal jerk v^3 kappa^2"]
+    assert all(line.split()[-2] == "0" for line in lines[2:11])  # nothing broken
+    assert "source lines, curves, number format, curve ends, G90/G91 and F restore: ok" in lines
+    assert "divided differences of the projected arc length over 2 ms, 9 ms" in stdout
+    assert lines[-1] == "result: OK: 0 violation(s)"
+
+
+def test_check_exits_1_and_names_the_violation(butterfly_nc: Path, tmp_path: Path) -> None:
+    lines = butterfly_nc.read_text().splitlines(keepends=True)
+    lines[2] = "G0 X0. Y0. Z0.\n"
+    bad = tmp_path / "bad.nc"
+    bad.write_text("".join(lines))
+    code, stdout, _ = run("check", BUTTERFLY, str(bad), "-m", "paper-table1")
+    assert code == 1
+    assert (f"{bad}:3: pass-through: line changed: expected 'G0 X54.493 Y52.139 Z0.', found "
+            "'G0 X0. Y0. Z0.'") in stdout.splitlines()
+    assert stdout.splitlines()[-1] == "result: FAILED: 1 violation(s)"
+    code, stdout, _ = run("check", BUTTERFLY, str(bad), "-m", "paper-table1", "--json")
+    assert code == 1
+    data = json.loads(stdout)
+    assert data["ok"] is False and data["violation_count"] == 1
+    assert data["violations"][0]["check"] == "pass-through"
+    assert {c["name"] for c in data["checks"]} >= {"path-deviation", "tangential-jerk"}
+
+
+def test_check_exits_2_on_unreadable_inputs(butterfly_nc: Path, tmp_path: Path) -> None:
+    code, _, stderr = run("check", BUTTERFLY, str(tmp_path / "none.nc"))
+    assert code == 2 and "does not exist" in stderr
+    broken = tmp_path / "broken.json"
+    broken.write_text('{"curves": [')
+    code, stdout, stderr = run("check", str(broken), str(butterfly_nc))
+    assert code == 2 and stdout == ""
+    assert stderr.strip() == f"{broken}:1:13: not valid JSON: Expecting value"
+
+
+def test_plot_writes_a_png(tmp_path: Path) -> None:
+    pytest.importorskip("matplotlib")  # the optional `plot` extra
+    out = tmp_path / "quarter.png"
+    code, stdout, stderr = run("plot", str(SAMPLES / "quarter-circle.json"), "-o", str(out),
+                               "--method", "rk4")
+    assert code == 0 and stdout == "" and stderr == ""
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 50_000
+
+
+def test_plot_of_a_curve_that_is_not_there_exits_2(tmp_path: Path) -> None:
+    pytest.importorskip("matplotlib")
+    code, _, stderr = run("plot", BUTTERFLY, "-o", str(tmp_path / "x.png"), "--curve", "1")
+    assert code == 2
+    assert stderr.strip() == (f"{BUTTERFLY}: there is no curve 1: the input has 1 NURBS curve(s), "
+                              "numbered from 0")
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_plot_without_matplotlib_says_how_to_get_it(tmp_path: Path,
+                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    for name in [m for m in sys.modules if m.split(".")[0] == "matplotlib"] + ["matplotlib"]:
+        monkeypatch.setitem(sys.modules, name, None)  # as if not installed: imports fail
+    monkeypatch.delitem(sys.modules, "nurbsfeed.plotting", raising=False)
+    monkeypatch.delattr(nurbsfeed, "plotting", raising=False)
+    code, stdout, stderr = run("plot", BUTTERFLY, "-o", str(tmp_path / "x.png"))
+    assert code == 2 and stdout == ""
+    assert stderr == "nurbsfeed plot needs matplotlib: pip install 'nurbsfeed[plot]'\n"
