@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import functools
 import glob
-import os
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor

@@ -14,8 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nurbsfeed.analysis import (CHECKS, _derivative_estimate, _stencils, check_files,
-                                chord_errors_mm, compare_file, curve_blocks, project_points)
+from nurbsfeed.analysis import CHECKS, check_files, compare_file, curve_blocks
+from nurbsfeed.analysis.check import _derivative_estimate, _stencils, project_points
+from nurbsfeed.analysis.geometry import chord_errors_mm
 from nurbsfeed.interpolate import METHODS, interpolate
 from nurbsfeed.machine import load_machine
 from nurbsfeed.pipeline import convert_file, plan_block

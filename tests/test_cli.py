@@ -15,7 +15,7 @@ import pytest
 from click.testing import CliRunner
 
 from nurbsfeed.cli import main
-from tests.conftest import ROOT, SAMPLES, load_curve
+from tests.conftest import ROOT, SAMPLES
 from tests.gcode_parse import moves
 
 GOLDEN = ROOT / "tests" / "golden"

@@ -1,309 +1,32 @@
-"""Measurements of a plan or an interpolation, and the independent check of a converted program.
-
-- `time_optimal_bound_s`: a lower bound on any schedule's cycle time (used by `plan`).
-- `compare_file`: the paper's Table 2 on any input: per interpolator the feed fluctuation (SPEC §3)
-  and the compiled kernel's time per step.
-- `check_files`: verifies a converted program against its source without running the planner;
-  every definition and tolerance is in the comment that opens the "check" section below.
-- `run_series`: what `nurbsfeed plot` draws for one interpolated curve.
-
-Lengths are in the program's unit ("mm" in names), times in seconds. No printing: `render_*`
-return text for the command line.
-"""
+"""`nurbsfeed check`: a converted program verified against its source, without running the
+planner; every definition and tolerance is in the comment that opens this module's body."""
 
 from __future__ import annotations
 
 import difflib
 import math
 import re
-import statistics
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from nurbsfeed.errors import InputError, Location
+from nurbsfeed.analysis.geometry import (
+    arc_length_mm,
+    chord_errors_mm,
+    curvature_1_mm,
+    curve_length_mm,
+)
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.geometry.kernel import eval_d1, find_span
-from nurbsfeed.geometry.nurbs import curvature_from_derivatives
-from nurbsfeed.interpolate import METHODS, SLOW_SPEED_REL, Interpolation, interpolate, step_curve
 from nurbsfeed.jit import jit
 from nurbsfeed.machine import MM_PER_INCH, Machine
-from nurbsfeed.pipeline import plan_block, read_program, read_text
-from nurbsfeed.planning.limits import Limits, speed_limit
-from nurbsfeed.planning.planner import Plan, feed_at
+from nurbsfeed.pipeline import read_program, read_text
+from nurbsfeed.planning.limits import Limits
+from nurbsfeed.planning.planner import feed_at
 from nurbsfeed.program import CurveBlock, PassThrough
 
-
-def time_optimal_bound_s(plan: Plan) -> float:
-    """Lower bound on the cycle time under the pointwise limit and |a_t| <= A_t alone.
-
-    The classic two-pass integration on the grid: forward v^2 <= v_prev^2 + 2 A ds, backward the
-    same, both capped by the pointwise limit of Eq. 15 (not eroded), from rest to rest. No
-    schedule that respects the limits can be faster; a jerk limit only makes it slower.
-    """
-    grid, lim = plan.grid, plan.limits
-    if grid.length_mm == 0.0:
-        return 0.0
-    ds = np.diff(grid.s_mm)
-    cap = speed_limit(grid.kappa_1_mm, lim, np.inf)
-    cap[0] = cap[-1] = 0.0
-    v2 = np.minimum(cap, lim.feed_mm_s) ** 2
-    two_a = 2.0 * lim.acc_mm_s2
-    for i in range(1, v2.size):
-        v2[i] = min(v2[i], v2[i - 1] + two_a * ds[i - 1])
-    for i in range(v2.size - 2, -1, -1):
-        v2[i] = min(v2[i], v2[i + 1] + two_a * ds[i])
-    v = np.sqrt(v2)
-    return float(np.sum(2.0 * ds / (v[:-1] + v[1:])))
-
-
-def curve_blocks(path: Path, machine: Machine, dialect: str = "auto") -> list[CurveBlock]:
-    """The NURBS curves of an input file, in file order."""
-    items = read_program(path, read_text(path), dialect, machine.decimals)
-    return [item for item in items if isinstance(item, CurveBlock)]
-
-
-# ---- compare: the paper's Table 2 -------------------------------------------------------------
-
-# Wei et al. 2022, Table 2 (butterfly, Table 1 limits, MATLAB): max feed fluctuation in %, and
-# computation time per interpolation step in microseconds.
-PAPER_TABLE2 = {"taylor1": (6.84, 3.9), "rk4": (0.36, 16.1), "rk2c": (0.0281, 11.5)}
-
-
-@dataclass(frozen=True)
-class MethodRow:
-    """One interpolator over every curve of the input."""
-
-    method: str
-    max_ff_pct: float  # max over curves of the per-curve maximum
-    mean_ff_pct: float  # mean over every period of every curve (curves weighted by their steps)
-    n_points: int
-    n_steps: int
-    us_per_step: float  # median kernel time of one run over all targets / steps
-    paper_max_ff_pct: float
-    paper_us_per_step: float
-
-
-@dataclass(frozen=True)
-class Comparison:
-    """Table 2 for one input file."""
-
-    source: str
-    n_curves: int  # curves that move (zero-length curves have no period to measure)
-    n_zero_length: int
-    repeat: int
-    rows: tuple[MethodRow, ...]
-
-    def as_dict(self) -> dict[str, Any]:
-        return {"source": self.source, "curves": self.n_curves,
-                "zero_length_curves": self.n_zero_length, "repeat": self.repeat,
-                "aggregate": AGGREGATE_NOTE if self.n_curves > 1 else None,
-                "methods": [vars(row) for row in self.rows]}
-
-
-AGGREGATE_NOTE = ("max: largest per-curve maximum; mean: over every period of every curve "
-                  "(curves weighted by their number of steps)")
-
-
-def kernel_seconds(plan: Plan, result: Interpolation, repeat: int) -> float:
-    """Median wall time of `repeat` runs of the compiled kernel over all of a curve's targets.
-
-    The kernel steps once through result.ds_mm from the curve start (one run, whatever the
-    stretches between rests): the cost per step, without the end-landing search. The kernel was
-    compiled by the `interpolate` call that produced `result`.
-    """
-    curve = plan.curve
-    slow = SLOW_SPEED_REL * plan.length_mm / (curve.u_max - curve.u_min)  # as interpolate()
-    u = np.empty(result.ds_mm.size + 1)
-    pts = np.empty((u.size, 3))
-    code = METHODS[result.method]
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        step_curve(code, curve.knots, curve.homogeneous, curve.degree, curve.n_ctrl,
-                   curve.u_min, result.ds_mm, 1.0, slow, u, pts)
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
-
-
-def compare_file(path: Path, machine: Machine, dialect: str, repeat: int) -> Comparison:
-    """Feed fluctuation and time per step of every interpolator on every curve of `path`."""
-    plans = [plan_block(block, machine) for block in curve_blocks(path, machine, dialect)]
-    moving = [p for p in plans if p.n_periods > 0]
-    rows = []
-    for method in METHODS:
-        ff, seconds, points, steps = [], 0.0, 0, 0
-        for plan in moving:
-            result = interpolate(plan, method)
-            ff.append(result.feed_fluctuation())
-            seconds += kernel_seconds(plan, result, repeat)
-            points += result.n_points
-            steps += result.ds_mm.size
-        every = np.concatenate(ff) if ff else np.zeros(0)
-        paper_ff, paper_us = PAPER_TABLE2[method]
-        rows.append(MethodRow(method, 100.0 * float(every.max()) if every.size else 0.0,
-                              100.0 * float(every.mean()) if every.size else 0.0, points, steps,
-                              1e6 * seconds / steps if steps else 0.0, paper_ff, paper_us))
-    return Comparison(str(path), len(moving), len(plans) - len(moving), repeat, tuple(rows))
-
-
-def render_comparison(c: Comparison, machine_name: str) -> str:
-    """The comparison as the paper's Table 2, with the paper's numbers alongside."""
-    lines = [f"{c.source}: {c.n_curves} curve(s), machine {machine_name}"
-             + (f", {c.n_zero_length} zero-length curve(s) skipped" if c.n_zero_length else ""),
-             f"{'method':<8} {'max FF %':>11} {'mean FF %':>11} {'points':>9} "
-             f"{'us/step':>8}   {'paper max FF %':>14} {'paper us/step':>13}"]
-    for r in c.rows:
-        lines.append(f"{r.method:<8} {r.max_ff_pct:>11.4g} {r.mean_ff_pct:>11.4g} "
-                     f"{r.n_points:>9,} {r.us_per_step:>8.3f}   {r.paper_max_ff_pct:>14g} "
-                     f"{r.paper_us_per_step:>13g}")
-    lines.append("FF = | |C(u_k+1) - C(u_k)| - ds_k | / ds_k over every period (SPEC §3); "
-                 f"us/step: median of {c.repeat} compiled kernel runs")
-    lines.append("paper: butterfly, Table 1 limits, MATLAB (Wei et al. 2022, Table 2)")
-    if c.n_curves > 1:
-        lines.append(f"aggregated over {c.n_curves} curves: {AGGREGATE_NOTE}")
-    return "\n".join(lines)
-
-
-# ---- geometry shared by check and plot ---------------------------------------------------------
-
-CHORD_SAMPLES = 9
-CHORD_REFINE_ITERATIONS = 40
-GOLDEN = 0.5 * (math.sqrt(5.0) - 1.0)
-
-
-def _distance_to_segments(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Distance of points p from segments [a, b]: (..., 3) each -> (...,)."""
-    ab = b - a
-    len2 = np.sum(ab * ab, axis=-1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.where(len2 > 0.0, np.sum((p - a) * ab, axis=-1) / len2, 0.0)
-    t = np.clip(t, 0.0, 1.0)
-    return np.linalg.norm(p - a - t[..., None] * ab, axis=-1)
-
-
-def chord_errors_mm(curve: NurbsCurve, u0: np.ndarray, u1: np.ndarray, a: np.ndarray,
-                    b: np.ndarray) -> np.ndarray:
-    """Farthest distance of the arc C([u0_i, u1_i]) from the segment [a_i, b_i]: (N,) -> (N,).
-
-    a, b: (N, 3). CHORD_SAMPLES inner samples locate the farthest point, then a golden-section
-    search refines it between the samples beside it (the distance is unimodal on one step).
-    """
-    if u0.size == 0:
-        return np.zeros(0)
-    frac = np.linspace(0.0, 1.0, CHORD_SAMPLES + 2)
-    du = u1 - u0
-    pts = curve.point((u0[:, None] + du[:, None] * frac[None, :]).ravel())
-    dist = _distance_to_segments(pts.reshape(u0.size, frac.size, 3), a[:, None, :],
-                                 b[:, None, :])
-    best = np.argmax(dist, axis=1)
-    worst = dist[np.arange(u0.size), best]
-    lo = frac[np.maximum(best - 1, 0)]
-    hi = frac[np.minimum(best + 1, frac.size - 1)]
-
-    def at(f: np.ndarray) -> np.ndarray:
-        return _distance_to_segments(curve.point(u0 + du * f), a, b)
-
-    x1, x2 = hi - GOLDEN * (hi - lo), lo + GOLDEN * (hi - lo)
-    f1, f2 = at(x1), at(x2)
-    for _ in range(CHORD_REFINE_ITERATIONS):
-        left = f1 >= f2
-        hi = np.where(left, x2, hi)
-        lo = np.where(left, lo, x1)
-        new = np.where(left, hi - GOLDEN * (hi - lo), lo + GOLDEN * (hi - lo))
-        f_new = at(new)
-        x1, x2, f1, f2 = (np.where(left, new, x2), np.where(left, x1, new),
-                          np.where(left, f_new, f2), np.where(left, f1, f_new))
-    return np.maximum(worst, np.maximum(f1, f2))
-
-
-GAUSS_X, GAUSS_W = np.polynomial.legendre.leggauss(5)
-
-
-def arc_length_mm(curve: NurbsCurve, u: np.ndarray) -> np.ndarray:
-    """Arc length from u_min to each u: (N,) -> (N,), u in any order.
-
-    5-point Gauss-Legendre on the intervals between the sorted parameters and the knots (so that
-    no interval holds a knot, where |C'| may jump): exact to rounding on steps this short.
-    """
-    nodes = np.unique(np.concatenate([np.asarray(u, dtype=float), curve.span_breaks]))
-    half = 0.5 * np.diff(nodes)
-    mid = 0.5 * (nodes[:-1] + nodes[1:])
-    speed = curve.speed((mid[:, None] + half[:, None] * GAUSS_X[None, :]).ravel())
-    lengths = half * (speed.reshape(mid.size, GAUSS_X.size) @ GAUSS_W)
-    cumulative = np.concatenate([[0.0], np.cumsum(lengths)])
-    return cumulative[np.searchsorted(nodes, u)] - cumulative[np.searchsorted(nodes,
-                                                                              curve.u_min)]
-
-
-def curve_length_mm(curve: NurbsCurve) -> float:
-    """The whole curve's arc length."""
-    return float(arc_length_mm(curve, np.array([curve.u_max]))[0])
-
-
-def curvature_1_mm(curve: NurbsCurve, u: np.ndarray) -> np.ndarray:
-    """kappa at u: (N,) -> (N,); 0 where C'(u) = 0 (a repeated control point)."""
-    _, c1, c2 = curve.derivatives(u)
-    return np.nan_to_num(curvature_from_derivatives(c1, c2), nan=0.0)
-
-
-# ---- plot data ----------------------------------------------------------------------------------
-
-@dataclass(frozen=True, eq=False)
-class RunSeries:
-    """What the plots of one interpolated curve show. (N+1,) per point, (N,) per step."""
-
-    t_s: np.ndarray  # (N+1,) time of each point
-    t_mid_s: np.ndarray  # (N,) mid-time of each step
-    planned_v_mm_s: np.ndarray  # (N+1,) feed of the time law
-    feed_cap_mm_s: np.ndarray  # (N+1,) v_m: min(machine max feed, programmed feed) at the point
-    chord_v_mm_s: np.ndarray  # (N,) |P_k+1 - P_k| / T
-    tangential_acc_mm_s2: np.ndarray  # (N+1,)
-    normal_acc_mm_s2: np.ndarray  # (N+1,) v^2 kappa
-    tangential_jerk_mm_s3: np.ndarray  # (N+1,)
-    normal_jerk_mm_s3: np.ndarray  # (N+1,) v^3 kappa^2
-    chord_error_mm: np.ndarray  # (N,) on the true curve, unrounded points
-    feed_fluctuation_pct: np.ndarray  # (N,) SPEC §3; NaN where the target step is 0
-    key_points: np.ndarray  # (K, 3) the plan's key points
-    key_kind: np.ndarray  # (K,)
-
-
-def run_series(block: CurveBlock, plan: Plan, result: Interpolation) -> RunSeries:
-    """The series of the paper's figures 9-13 for one curve and one interpolator."""
-    curve = plan.curve
-    cap = np.minimum(plan.limits.feed_mm_s, feed_at(result.u, block.feed_u, block.feed_mm_s))
-    kappa = curvature_1_mm(curve, result.u)
-    v = result.v_mm_s
-    chord = np.linalg.norm(np.diff(result.points, axis=0), axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ff = np.where(result.ds_mm > 0.0, np.abs(chord - result.ds_mm) / result.ds_mm, np.nan)
-    err = chord_errors_mm(curve, result.u[:-1], result.u[1:], result.points[:-1],
-                          result.points[1:])
-    return RunSeries(result.t_s, 0.5 * (result.t_s[:-1] + result.t_s[1:]), v, cap,
-                     chord / result.period_s, result.a_mm_s2, v**2 * kappa,
-                     np.asarray(result.j_mm_s3, dtype=float), v**3 * kappa**2, err, 100.0 * ff,
-                     curve.point(plan.key_u), np.asarray(plan.key_kind))
-
-
-def curve_run(path: Path, machine: Machine, method: str, dialect: str,
-              index: int) -> tuple[CurveBlock, Plan, Interpolation]:
-    """Plan and interpolate curve `index` (from 0, in file order) of `path`: what `plot` draws."""
-    blocks = curve_blocks(path, machine, dialect)
-    if index >= len(blocks):
-        raise InputError(f"there is no curve {index}: the input has {len(blocks)} NURBS curve(s), "
-                         "numbered from 0", Location(str(path)))
-    block = blocks[index]
-    plan = plan_block(block, machine)
-    if plan.n_periods == 0:
-        raise InputError(f"curve {index} ({block.curve.name}) has zero length: nothing to plot",
-                         block.location)
-    return block, plan, interpolate(plan, method)
-
-
-# ---- check: a converted program against its source ----------------------------------------------
 #
 # Reference: only the source's curves and the machine profile; the planner is never run. Each
 # emitted point is mapped back to its curve by projection (`_project_kernel`): a search that
