@@ -107,7 +107,7 @@ def _convert_one(source: Path, target: Path | None, machine: Machine, method: st
     """Convert one file (also the unit of work of --jobs); errors come back as data."""
     from nurbsfeed.pipeline import convert_file
 
-    status = _Progress(source.name) if progress else None
+    status = _Progress(source) if progress else None
     start = time.perf_counter()
     try:
         report = convert_file(source, target, machine, method, dialect, trace,
@@ -125,19 +125,38 @@ def _convert_one(source: Path, target: Path | None, machine: Machine, method: st
 
 
 class _Progress:
-    """A one-line progress display on stderr (only used when stderr is a terminal)."""
+    """A progress bar on stderr (only used when stderr is a terminal).
 
-    def __init__(self, name: str) -> None:
-        self.name, self.curves, self.points, self.last = name, 0, 0, 0.0
+    The fraction done is the source line of the last converted curve over the file's line
+    count: cheap, monotone, and right for programs whose curves are spread through the file.
+    """
+
+    WIDTH = 30
+
+    def __init__(self, source: Path) -> None:
+        self.name, self.curves, self.points, self.last = source.name, 0, 0, 0.0
+        self.start = time.monotonic()
+        try:
+            with open(source, "rb") as handle:
+                self.lines = max(1, sum(chunk.count(b"\n") for chunk in
+                                        iter(lambda: handle.read(1 << 20), b"")))
+        except OSError:
+            self.lines = 1
 
     def update(self, result: Any) -> None:
         self.curves += 1
         self.points += result.n_points
         now = time.monotonic()
-        if now - self.last > 0.1:
-            self.last = now
-            sys.stderr.write(f"\r{self.name}: {self.curves} curves, {self.points:,} points ")
-            sys.stderr.flush()
+        if now - self.last < 0.1:
+            return
+        self.last = now
+        done = min(1.0, (result.location.line or 1) / self.lines)
+        filled = int(done * self.WIDTH)
+        eta = (now - self.start) * (1.0 - done) / done if done > 0 else 0.0
+        sys.stderr.write(f"\r{self.name} [{'#' * filled}{'.' * (self.WIDTH - filled)}] "
+                         f"{100 * done:3.0f}%  {self.curves} curves, {self.points:,} points, "
+                         f"{eta:.0f} s left ")
+        sys.stderr.flush()
 
     def close(self) -> None:
         sys.stderr.write("\r\033[K")

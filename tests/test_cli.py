@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import re
 import difflib
 import io
 import os
@@ -252,3 +253,30 @@ def test_taylor1_conversions_warn_that_they_can_break_the_limits(tmp_path: Path)
     assert stderr.startswith("nurbsfeed: warning: taylor1 is the paper's first-order baseline")
     code, _, stderr = run("convert", str(SAMPLES / "quarter-circle.json"), "-o", str(out), "-q")
     assert stderr == ""
+
+
+def test_progress_bar_only_on_a_terminal(tmp_path: Path) -> None:
+    """Not a terminal (CliRunner): no progress at all. A pseudo-terminal: a bar on stderr."""
+    import pty
+
+    big = tmp_path / "big.json"
+    big.write_text(BUTTERFLIES.format(",".join([BUTTERFLY_CURVE] * 30)))
+    code, _, stderr = run("convert", str(big), "-o", str(tmp_path / "a.nc"))
+    assert code == 0 and "\r" not in stderr and "[" not in stderr
+    out = tmp_path / "b.nc"
+    chunks: list[bytes] = []
+
+    def read(fd: int) -> bytes:
+        data = os.read(fd, 4096)
+        chunks.append(data)
+        return data
+
+    status = pty.spawn([sys.executable, "-m", "nurbsfeed.cli", "convert", str(big), "-o",
+                        str(out)], read)
+    text = b"".join(chunks).decode()
+    assert os.waitstatus_to_exitcode(status) == 0 and out.exists()
+    assert re.search(r"\rbig\.json \[#*\.*\] +\d+%  \d+ curves, [\d,]+ points", text)
+
+
+BUTTERFLY_CURVE = (SAMPLES / "butterfly.json").read_text().split('"curves": [')[1].rsplit("]", 1)[0]
+BUTTERFLIES = '{{"units": "mm", "curves": [{}]}}'
