@@ -14,10 +14,24 @@ Where |C'(u)| vanishes (repeated control points, SPEC §3a) a step solves the ch
 changes by more than a quarter within the step, which only happens right next to such a point.
 
 End landing: rk2c makes every chord equal to its target, so its arc position runs ahead of the
-time law and the last step would overshoot the end. All targets are scaled by one factor
-sigma <= 1, found by a secant search so that the last chord, from the last stepped point to the
-curve end, equals its own target; sigma only lowers speed, acceleration and jerk. The last point
-is the curve end exactly.
+time law (by the arc minus the chord of every step, ~1 um over a curve) and the last step would
+overshoot the end. The last point is the curve end itself, and the targets are lowered (never
+raised: no limit is raised either) so that the last chord, from the last stepped point to the
+end, equals its own target:
+1. All targets are scaled by one factor sigma <= 1: for rk2c 1 - (the drift predicted from the
+   curvature along the way, see `_sample_stretch`) / length + LANDING_MARGIN_REL, so that the
+   first run overshoots by a little; for rk4 and taylor1, sigma = 1.
+2. The overshoot is taken out by a slowdown bump in the stretch's last cruise (or hold) of the
+   law, where a = j = 0: the law's v becomes v - e v_c sin^2(pi x / D) over its last
+   BUMP_PERIODS periods (x from the bump's start, D its length; e ~ 1e-6 and at most
+   BUMP_MAX_SLOWDOWN, so that the bump's own a and j, e v_c pi / D and e v_c 2 pi^2 / D^2, stay
+   far below the limits). e is found by a secant search that steps again only from the bump
+   on, a few percent of the stretch: one full run and a short one instead of two full runs.
+3. Without such a cruise (or if the first run falls short), sigma itself is found by a secant
+   search over full runs (d residual / d sigma ~ -length), never above 1.
+Both searches stop when the last chord matches its target to LANDING_REL_TOL, or to the rounding
+floor of the stepping where that is coarser (but at most LANDING_REL_MAX), or where rounding
+stops them improving (then the best run stands).
 Where the plan rests inside the curve (a corner), each stretch between rests is stepped and
 landed on its own, so a point falls exactly on the corner.
 """
@@ -30,24 +44,27 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nurbsfeed.geometry.kernel import eval_d1, find_span
+from nurbsfeed.geometry.kernel import find_span, point_d1, span_polynomials
 from nurbsfeed.jit import jit
 from nurbsfeed.planning.planner import Plan
+from nurbsfeed.planning.timelaw import evaluate
 
 METHODS = {"taylor1": 0, "rk4": 1, "rk2c": 2}
 SLOW_SPEED_REL = 1e-3  # |C'| below this fraction of the mean |C'| is treated as "zero"
 # rk2c / rk4: when |C'| changes by more than this fraction across one step, the step is next to
 # a point where C' = 0 and the Taylor-based update is not valid there: solve the chord instead.
 STEP_SPEED_CHANGE_MAX = 0.25
-LANDING_REL_TOL = 1e-6  # of the last target: the last chord matches it to 1e-4 %
-LANDING_ULPS = 16
+LANDING_REL_TOL = 1e-6  # of the last target: the last chord matches it to 1e-4 % ...
+LANDING_REL_MAX = 5e-6  # ... or, where rounding does not resolve that, to half rk2c's 1e-5
 LANDING_MAX_RUNS = 8
+LANDING_MARGIN_REL = 1e-8  # the first run's sigma lies this far (relative) above the estimate
+BUMP_PERIODS = 32
+BUMP_MAX_SLOWDOWN = 1e-4
 CHORD_ITERATIONS = 200
 
 
 @jit
-def _chord_step(knots, cw, degree, n_ctrl, u, px, py, pz, ds, guess, span,
-                basis, dbasis, left, right, p_tmp, d_tmp):
+def _chord_step(knots, coef, degree, n_ctrl, u, px, py, pz, ds, guess, span):
     """The du > 0 with |C(u + du) - P| = ds, by bracketing and Illinois regula falsi."""
     lo = 0.0
     g_lo = -ds
@@ -55,9 +72,8 @@ def _chord_step(knots, cw, degree, n_ctrl, u, px, py, pz, ds, guess, span,
     g_hi = -ds
     for _ in range(CHORD_ITERATIONS):
         span = find_span(knots, degree, n_ctrl, u + hi, span)
-        eval_d1(knots, cw, degree, u + hi, span, basis, dbasis, left, right, p_tmp, d_tmp)
-        g_hi = math.sqrt((p_tmp[0] - px) ** 2 + (p_tmp[1] - py) ** 2
-                         + (p_tmp[2] - pz) ** 2) - ds
+        cx, cy, cz, _, _, _ = point_d1(knots, coef, degree, span, u + hi)
+        g_hi = math.sqrt((cx - px) ** 2 + (cy - py) ** 2 + (cz - pz) ** 2) - ds
         if g_hi >= 0.0:
             break
         lo = hi
@@ -69,8 +85,8 @@ def _chord_step(knots, cw, degree, n_ctrl, u, px, py, pz, ds, guess, span,
             break
         x = (lo * g_hi - hi * g_lo) / (g_hi - g_lo)
         span = find_span(knots, degree, n_ctrl, u + x, span)
-        eval_d1(knots, cw, degree, u + x, span, basis, dbasis, left, right, p_tmp, d_tmp)
-        g = math.sqrt((p_tmp[0] - px) ** 2 + (p_tmp[1] - py) ** 2 + (p_tmp[2] - pz) ** 2) - ds
+        cx, cy, cz, _, _, _ = point_d1(knots, coef, degree, span, u + x)
+        g = math.sqrt((cx - px) ** 2 + (cy - py) ** 2 + (cz - pz) ** 2) - ds
         if g == 0.0:
             return x
         if g < 0.0:
@@ -89,35 +105,28 @@ def _chord_step(knots, cw, degree, n_ctrl, u, px, py, pz, ds, guess, span,
 
 
 @jit
-def step_curve(method, knots, cw, degree, n_spans, u0, ds, sigma, slow_speed, u_out, p_out):
+def step_spans(method, knots, coef, degree, n_spans, u0, ds, sigma, slow_speed, u_out, p_out):
     """Step from u0 through the targets sigma * ds (N,): u_out (N+1,), p_out (N+1, 3) = C(u_k).
 
-    Spans past index n_spans - 1 are not used: beyond the end of the stretch the last span's
-    polynomial extrapolates, so the landing search sees a smooth continuation even at a corner.
+    coef: the curve's span polynomials (geometry.kernel.span_polynomials). Spans past index
+    n_spans - 1 are not used: beyond the end of the stretch the last span's polynomial
+    extrapolates, so the landing search sees a smooth continuation even at a corner.
     """
     n_ctrl = n_spans
-    basis = np.empty(degree + 1)
-    dbasis = np.empty(degree + 1)
-    left = np.empty(degree + 1)
-    right = np.empty(degree + 1)
-    p = np.empty(3)
-    d = np.empty(3)
-    pt = np.empty(3)
-    dt = np.empty(3)
     u_range = knots[knots.size - 1] - knots[0]
     u = u0
     span = find_span(knots, degree, n_ctrl, u, degree)
     for k in range(ds.size + 1):
         span = find_span(knots, degree, n_ctrl, u, span)
-        eval_d1(knots, cw, degree, u, span, basis, dbasis, left, right, p, d)
+        px, py, pz, dx, dy, dz = point_d1(knots, coef, degree, span, u)
         u_out[k] = u
-        p_out[k, 0] = p[0]
-        p_out[k, 1] = p[1]
-        p_out[k, 2] = p[2]
+        p_out[k, 0] = px
+        p_out[k, 1] = py
+        p_out[k, 2] = pz
         if k == ds.size:
             break
         h = sigma * ds[k]
-        speed = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        speed = math.sqrt(dx * dx + dy * dy + dz * dz)
         if h <= 0.0:
             continue
         slow = speed < slow_speed
@@ -128,14 +137,14 @@ def step_curve(method, knots, cw, degree, n_spans, u0, ds, sigma, slow_speed, u_
                 continue
             if method == 1:
                 s2 = find_span(knots, degree, n_ctrl, u + 0.5 * h * k1, span)
-                eval_d1(knots, cw, degree, u + 0.5 * h * k1, s2, basis, dbasis, left, right, pt, dt)
-                sp2 = math.sqrt(dt[0] * dt[0] + dt[1] * dt[1] + dt[2] * dt[2])
+                _, _, _, tx, ty, tz = point_d1(knots, coef, degree, s2, u + 0.5 * h * k1)
+                sp2 = math.sqrt(tx * tx + ty * ty + tz * tz)
                 s3 = find_span(knots, degree, n_ctrl, u + 0.5 * h / sp2, s2)
-                eval_d1(knots, cw, degree, u + 0.5 * h / sp2, s3, basis, dbasis, left, right, pt, dt)
-                sp3 = math.sqrt(dt[0] * dt[0] + dt[1] * dt[1] + dt[2] * dt[2])
+                _, _, _, tx, ty, tz = point_d1(knots, coef, degree, s3, u + 0.5 * h / sp2)
+                sp3 = math.sqrt(tx * tx + ty * ty + tz * tz)
                 s4 = find_span(knots, degree, n_ctrl, u + h / sp3, s3)
-                eval_d1(knots, cw, degree, u + h / sp3, s4, basis, dbasis, left, right, pt, dt)
-                sp4 = math.sqrt(dt[0] * dt[0] + dt[1] * dt[1] + dt[2] * dt[2])
+                _, _, _, tx, ty, tz = point_d1(knots, coef, degree, s4, u + h / sp3)
+                sp4 = math.sqrt(tx * tx + ty * ty + tz * tz)
                 slow = (sp2 < slow_speed or sp3 < slow_speed or sp4 < slow_speed
                         or abs(1.0 - speed / sp4) > STEP_SPEED_CHANGE_MAX)
                 if not slow:
@@ -143,18 +152,18 @@ def step_curve(method, knots, cw, degree, n_spans, u0, ds, sigma, slow_speed, u_
                     continue
             else:
                 s2 = find_span(knots, degree, n_ctrl, u + h * k1, span)
-                eval_d1(knots, cw, degree, u + h * k1, s2, basis, dbasis, left, right, pt, dt)
-                sp2 = math.sqrt(dt[0] * dt[0] + dt[1] * dt[1] + dt[2] * dt[2])
+                _, _, _, tx, ty, tz = point_d1(knots, coef, degree, s2, u + h * k1)
+                sp2 = math.sqrt(tx * tx + ty * ty + tz * tz)
                 slow = sp2 < slow_speed or abs(1.0 - speed / sp2) > STEP_SPEED_CHANGE_MAX
                 if not slow:
                     ut = u + 0.5 * h * (k1 + 1.0 / sp2)
                     s3 = find_span(knots, degree, n_ctrl, ut, s2)
-                    eval_d1(knots, cw, degree, ut, s3, basis, dbasis, left, right, pt, dt)
-                    ex = pt[0] - p[0]
-                    ey = pt[1] - p[1]
-                    ez = pt[2] - p[2]
-                    c1 = dt[0] * dt[0] + dt[1] * dt[1] + dt[2] * dt[2]
-                    c2 = 2.0 * (dt[0] * ex + dt[1] * ey + dt[2] * ez)
+                    qx, qy, qz, tx, ty, tz = point_d1(knots, coef, degree, s3, ut)
+                    ex = qx - px
+                    ey = qy - py
+                    ez = qz - pz
+                    c1 = tx * tx + ty * ty + tz * tz
+                    c2 = 2.0 * (tx * ex + ty * ey + tz * ez)
                     c3 = ex * ex + ey * ey + ez * ez - h * h
                     disc = c2 * c2 - 4.0 * c1 * c3
                     du = 0.0
@@ -166,8 +175,14 @@ def step_curve(method, knots, cw, degree, n_spans, u0, ds, sigma, slow_speed, u_
                     continue
         guess = h / slow_speed if speed < slow_speed else h / speed
         guess = min(guess, u_range)
-        u = u + _chord_step(knots, cw, degree, n_ctrl, u, p[0], p[1], p[2], h, guess, span,
-                            basis, dbasis, left, right, pt, dt)
+        u = u + _chord_step(knots, coef, degree, n_ctrl, u, px, py, pz, h, guess, span)
+
+
+@jit
+def step_curve(method, knots, cw, degree, n_spans, u0, ds, sigma, slow_speed, u_out, p_out):
+    """`step_spans` for a curve given by its homogeneous control points cw (n+1, 4)."""
+    step_spans(method, knots, span_polynomials(knots, cw, degree), degree, n_spans, u0, ds,
+               sigma, slow_speed, u_out, p_out)
 
 
 @dataclass(frozen=True, eq=False)
@@ -179,14 +194,15 @@ class Interpolation:
     u: np.ndarray
     points: np.ndarray  # C(u_k), full precision; first and last exactly the curve ends
     t_s: np.ndarray
-    s_mm: np.ndarray  # sigma * s(t_k): the targets actually stepped
+    s_mm: np.ndarray  # sum of the targets actually stepped
     v_mm_s: np.ndarray
     a_mm_s2: np.ndarray
     j_mm_s3: np.ndarray
-    ds_mm: np.ndarray  # sigma * targets, (N,)
+    ds_mm: np.ndarray  # the targets actually stepped, (N,)
     sigma: np.ndarray  # (P,) target scale of each stretch between rests
-    landing_runs: int  # kernel runs over all stretches
-    step_seconds: float  # wall time of the final kernel run of every stretch
+    slowdown: np.ndarray  # (P,) relative depth e of each stretch's landing bump (0: none)
+    landing_runs: float  # kernel runs over all stretches, a run from a bump on in its share
+    step_seconds: float  # wall time of the last full kernel run of every stretch
 
     @property
     def n_points(self) -> int:
@@ -200,85 +216,258 @@ class Interpolation:
         return ff[self.ds_mm > 0]
 
 
-@dataclass(frozen=True)
-class _Stretch:
-    """The result of stepping one stretch between two rests."""
+@jit
+def _sample_stretch(t0, s0, v0, a0, jk, t_a, t_b, n, grid_s, grid_kappa, with_drift):
+    """The law over a stretch of n periods from plan time t_a to t_b: the plan times (N+1,)
+    t_a + k (t_b - t_a) / n (t_b exactly at the end), v, a, j there (N+1,), the targets ds (N,)
+    and, if with_drift, how far rk2c's arc position will run ahead of them (else 0).
 
-    u: np.ndarray
-    points: np.ndarray
-    ds_mm: np.ndarray
+    ds_k = s(t_k+1) - s(t_k) is taken piece by piece (the pieces' starts s0 differ, then the
+    arcs within them), so that a tiny step far along the curve keeps its relative precision.
+    The drift is sum(min(kappa ds, 2)^2 ds) / 24, the arc minus the chord of a circular arc of
+    curvature kappa per step, with kappa at the middle of each step interpolated linearly on
+    the grid (grid_s, grid_kappa (M,)); beside a corner (kappa infinite) from its finite side.
+    """
+    t_plan = np.empty(n + 1)
+    step = (t_b - t_a) / n
+    for k in range(n):
+        t_plan[k] = t_a + k * step
+    t_plan[n] = t_b
+    piece = np.empty(n + 1, dtype=np.int64)
+    local = np.empty(n + 1)
+    v = np.empty(n + 1)
+    a = np.empty(n + 1)
+    j = np.empty(n + 1)
+    evaluate(t0, s0, v0, a0, jk, t_plan, piece, local, v, a, j)
+    ds = np.empty(n)
+    for k in range(n):
+        ds[k] = (s0[piece[k + 1]] - s0[piece[k]]) + (local[k + 1] - local[k])
+    drift = 0.0
+    if with_drift:
+        last = grid_s.size - 1
+        node = 0
+        for k in range(n):
+            s = s0[piece[k]] + local[k] + 0.5 * ds[k]
+            while node + 1 < last and grid_s[node + 1] <= s:
+                node += 1
+            if s <= grid_s[0]:
+                kappa = grid_kappa[0]
+            elif s >= grid_s[last]:
+                kappa = grid_kappa[last]
+            else:
+                k_lo = grid_kappa[node]
+                k_hi = grid_kappa[node + 1]
+                if math.isinf(k_lo) or math.isinf(k_hi):  # beside a corner: the finite side
+                    kappa = k_hi if math.isinf(k_lo) else k_lo
+                else:
+                    w = (s - grid_s[node]) / (grid_s[node + 1] - grid_s[node])
+                    kappa = k_lo + w * (k_hi - k_lo)
+            if math.isinf(kappa):
+                continue
+            turn = min(kappa * ds[k], 2.0)
+            drift += turn * turn * ds[k]
+        drift /= 24.0
+    return t_plan, ds, v, a, j, drift
+
+
+@dataclass(frozen=True)
+class _Bump:
+    """The landing bump over periods k0 .. k0 + periods of a stretch (see the module docstring):
+    the law's speed v_c there is lowered by e v_c w(t), w = sin^2(pi x / D), x = t - t_start,
+    in plan time."""
+
+    k0: int
+    periods: int
+    t_start: float
+    duration: float  # D
+    v_mm_s: float  # v_c
+
+    def removed(self, t_s: np.ndarray) -> np.ndarray:
+        """Arc taken out by plan time t (per unit of e): v_c integral of w, (M,) -> (M,)."""
+        x = np.clip(t_s - self.t_start, 0.0, self.duration)
+        d = self.duration
+        return self.v_mm_s * (0.5 * x - d / (4.0 * math.pi) * np.sin(2.0 * math.pi * x / d))
+
+    def shape(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """v_c w, v_c w' and v_c w'' at plan times (M,) inside the bump."""
+        phase = 2.0 * math.pi * (t_s - self.t_start) / self.duration
+        w = 0.5 * (1.0 - np.cos(phase))
+        w1 = math.pi / self.duration * np.sin(phase)
+        w2 = 2.0 * (math.pi / self.duration) ** 2 * np.cos(phase)
+        return self.v_mm_s * w, self.v_mm_s * w1, self.v_mm_s * w2
+
+
+@jit
+def _last_flat_periods(t0, a0, jk, v0, duration, t_plan, periods):
+    """The first period k0 of the stretch's (t_plan (N+1,)) last `periods` periods that lie in
+    one piece of the law that cruises or holds (a = j = 0, v > 0), all before the stretch's
+    last period; the piece's speed. (-1, 0) if there are none."""
+    n = t_plan.size - 1
+    for i in range(t0.size - 1, -1, -1):
+        end = t0[i + 1] if i + 1 < t0.size else duration
+        if end <= t_plan[0]:
+            break
+        if jk[i] != 0.0 or a0[i] != 0.0 or v0[i] <= 0.0 or t0[i] >= t_plan[n]:
+            continue
+        # the periods k with t_plan[k] >= t0 and t_plan[k+1] <= end, the last one before n - 1
+        first = np.searchsorted(t_plan, t0[i])
+        stop = min(np.searchsorted(t_plan, end, side="right") - 1, n - 1)
+        if stop - first >= periods:
+            return stop - periods, v0[i]
+    return -1, 0.0
+
+
+def _bump_window(law, t_plan: np.ndarray) -> _Bump | None:
+    """The landing bump over the stretch's (t_plan (N+1,)) last BUMP_PERIODS periods in a cruise
+    or hold of the law, before its last period; None if there are none."""
+    k0, v_c = _last_flat_periods(law.t0_s, law.a0_mm_s2, law.jerk_mm_s3, law.v0_mm_s,
+                                 law.duration_s, t_plan, BUMP_PERIODS)
+    if k0 < 0:
+        return None
+    return _Bump(int(k0), BUMP_PERIODS, float(t_plan[k0]),
+                 float(t_plan[k0 + BUMP_PERIODS] - t_plan[k0]), float(v_c))
+
+
+@dataclass(frozen=True)
+class _Landing:
+    """How one stretch landed: the targets stepped (N,), sigma, the bump and its depth."""
+
+    targets: np.ndarray
     sigma: float
-    runs: int
+    bump: _Bump | None
+    slowdown: float
+    runs: float
     seconds: float
 
 
-def _step_stretch(curve, code: int, u_start: float, u_end: float, end_point: np.ndarray,
-                  ds: np.ndarray, slow: float, sigma_guess: float) -> _Stretch:
-    """Step from u_start through ds (N,) and land exactly on end_point.
+def _land(curve, code: int, u_start: float, u_end: float, end_point: np.ndarray,
+          ds: np.ndarray, slow: float, sigma: float, bump: _Bump | None, t_plan: np.ndarray,
+          u: np.ndarray, pts: np.ndarray) -> _Landing:
+    """Step from u_start through ds (N,) into u (N+1,) and pts (N+1, 3), landing exactly on
+    end_point (see the module docstring): first with targets sigma * ds, then with a bump or
+    another sigma.
 
-    The kernel makes the first N-1 steps with targets sigma * ds; the last point is end_point
-    itself, and sigma is found by a secant search so that the last chord, |end - P_{N-1}|,
-    equals its target sigma * ds[-1]. That residual is continuous and monotone in sigma even
-    where C' vanishes at the end (the curve folds back there when extrapolated).
+    The kernel makes the first N-1 steps; the last point is end_point itself, and the residual
+    |end - P_{N-1}| - (last target) is driven to zero. It is continuous and monotone in sigma
+    and e even where C' vanishes at the end (the curve folds back there when extrapolated).
     """
     n = ds.size
-    u = np.empty(n + 1)
-    pts = np.empty((n + 1, 3))
     total = float(ds.sum())
-    knots, cw = curve.knots, curve.homogeneous
-    head = ds[:-1]
+    knots, coef, degree = curve.knots, curve.span_polynomials, curve.degree
     n_spans = int(np.searchsorted(knots, u_end, side="left"))  # last span ends at u_end
-    # sigma resolves the landing only to about eps * (length + coordinates): ask no more
-    noise = LANDING_ULPS * np.finfo(float).eps * (total + float(np.max(np.abs(end_point))))
-    tol = max(LANDING_REL_TOL * float(ds[-1]), noise)
+    # Each step rounds the point to ~eps (length + coordinates), and those errors add up like a
+    # random walk: the landing resolves only to about sqrt(N) of them (measured: up to 1x on
+    # curves 1 m from the origin); ask no more, but never accept less than LANDING_REL_MAX.
+    noise = np.finfo(float).eps * (total + float(np.max(np.abs(end_point)))) * math.sqrt(n)
+    last_ds = float(ds[-1])
+    tol = max(LANDING_REL_TOL * last_ds, min(noise, LANDING_REL_MAX * last_ds))
+    head = ds[:-1]
 
-    def run(sigma: float) -> float:
-        step_curve(code, knots, cw, curve.degree, n_spans, u_start, head, sigma, slow,
-                   u[:-1], pts[:-1])
-        gap = float(np.linalg.norm(end_point - pts[-2]))
-        return (gap if u[-2] <= u_end else -gap) - sigma * float(ds[-1])
+    def residual(last_target: float) -> float:
+        gap = math.sqrt(sum((float(end_point[i]) - float(pts[-2, i])) ** 2 for i in range(3)))
+        return (gap if u[-2] <= u_end else -gap) - last_target
 
-    # d(residual)/d(sigma) ~ -total: a Newton step from the guess, then secant steps
-    sigma_prev, r_prev = sigma_guess, run(sigma_guess)
-    best = (abs(r_prev), sigma_guess)
-    sigma, runs, seconds = sigma_guess + r_prev / total, 1, 0.0
+    def run(s: float) -> float:
+        step_spans(code, knots, coef, degree, n_spans, u_start, head, s, slow, u[:-1], pts[:-1])
+        return residual(s * last_ds)
+
+    start = time.perf_counter()
+    r = run(sigma)
+    seconds = time.perf_counter() - start
+    runs = 1.0
+    if abs(r) > tol and r < 0.0 and bump is not None:
+        landed = _land_bump(code, knots, coef, degree, n_spans, ds, slow, sigma, bump, t_plan,
+                            u, pts, r, tol, residual)
+        if landed is not None:
+            targets, slowdown, bump_runs = landed
+            return _Landing(targets, sigma, bump, slowdown, runs + bump_runs, seconds)
+        r = run(sigma)  # the bump could not land: back to the plain run
+        runs += 1.0
+    # d(residual)/d(sigma) ~ -total: Newton, then secant steps, never above 1 (that would raise
+    # the speed). The best run after the first is kept aside, so that a last run that made
+    # things worse (rounding) costs a copy back.
+    sigma_prev, r_prev = sigma, r
+    best = (abs(r), sigma)
+    kept = None
+    sigma = min(sigma + r / total, 1.0)
     while abs(r_prev) > tol:
         start = time.perf_counter()
         r = run(sigma)
         seconds = time.perf_counter() - start
-        runs += 1
+        runs += 1.0
         improved = abs(r) < best[0]
         if improved:
             best = (abs(r), sigma)
-        # stop at the tolerance, or where the residual stops improving: below ~1e-12 mm it
+        # stop at the tolerance, or where the residual stops improving: below ~1e-11 mm it
         # is rounding (and branch switches inside the kernel), not a function of sigma
         if abs(r) <= tol or runs >= LANDING_MAX_RUNS or r == r_prev or not improved:
             break
-        sigma, sigma_prev, r_prev = sigma - r * (sigma - sigma_prev) / (r - r_prev), sigma, r
-    if sigma != best[1]:  # the last run was not the best one: step the best sigma again
+        kept = (sigma, u[:-1].copy(), pts[:-1].copy())
+        sigma, sigma_prev, r_prev = (min(sigma - r * (sigma - sigma_prev) / (r - r_prev), 1.0),
+                                     sigma, r)
+    if sigma != best[1]:  # the last run was not the best one: back to the best
         sigma = best[1]
-        run(sigma)
-        runs += 1
-    u[-1] = u_end
-    pts[-1] = end_point
-    return _Stretch(u, pts, sigma * ds, sigma, runs, seconds)
+        if kept is not None and kept[0] == sigma:
+            u[:-1], pts[:-1] = kept[1], kept[2]
+        else:
+            run(sigma)
+            runs += 1.0
+    return _Landing(sigma * ds, sigma, None, 0.0, runs, seconds)
 
 
-def _sigma_guess(plan: Plan, method: str, t_plan: np.ndarray, ds: np.ndarray) -> float:
-    """Where the landing search starts. rk2c steps chords of length ds, so it runs ahead of the
-    arc by sum(kappa^2 ds^3 / 24) (arc minus chord of a circular arc); rk4 follows the arc itself
-    and taylor1's drift has no cheap estimate, so both start from 1."""
-    if method != "rk2c":
-        return 1.0
-    s_mid = plan.law.at(0.5 * (t_plan[:-1] + t_plan[1:]))[0]
-    kappa = np.interp(s_mid, plan.grid.s_mm, plan.grid.kappa_1_mm)
-    total = float(ds.sum())
-    ahead = float(np.sum(np.minimum(kappa * ds, 2.0) ** 2 * ds)) / 24.0
-    return 1.0 - ahead / total if total > 0.0 else 1.0
+def _land_bump(code, knots, coef, degree, n_spans, ds, slow, sigma, bump, t_plan, u, pts,
+               r_full, tol, residual):
+    """Step 2 of the landing: the depth e of the bump that takes out the overshoot r_full < 0
+    of the full run, by a secant search over runs from the bump's first point on (the best run
+    where rounding stops it short of the tolerance). Returns the targets, e and the runs (as a
+    share of the full run), or None if e would exceed BUMP_MAX_SLOWDOWN or no bump does better
+    than none."""
+    n = ds.size
+    k0 = bump.k0
+    taken = np.diff(bump.removed(t_plan[k0:k0 + bump.periods + 1]))  # (M,) per unit of e
+    targets = sigma * ds
+    tail = targets[k0:n - 1].copy()
+    share = (n - 1 - k0) / (n - 1)
+    u0 = float(u[k0])
+
+    def run_tail(e: float) -> float:
+        tail[:bump.periods] = sigma * (ds[k0:k0 + bump.periods] - e * taken)
+        step_spans(code, knots, coef, degree, n_spans, u0, tail, 1.0, slow, u[k0:-1],
+                   pts[k0:-1])
+        return residual(float(targets[-1]))
+
+    # r rises by sigma * (arc taken out): exactly sigma * v_c D / 2 per unit of e
+    e_prev, r_prev = 0.0, r_full
+    e = -r_full / (sigma * float(taken.sum()))
+    best = (abs(r_full), 0.0)
+    runs = 0.0
+    for _ in range(LANDING_MAX_RUNS):
+        if not 0.0 < e <= BUMP_MAX_SLOWDOWN:
+            return None
+        r = run_tail(e)
+        runs += share
+        if abs(r) < best[0]:
+            best = (abs(r), e)
+        # stop at the tolerance, or where the residual stops improving (rounding)
+        if abs(r) <= tol or r == r_prev or abs(r) >= abs(r_prev):
+            break
+        e, e_prev, r_prev = e - r * (e - e_prev) / (r - r_prev), e, r
+    if best[1] == 0.0:  # no bump did better than none
+        return None
+    if e != best[1]:
+        e = best[1]
+        run_tail(e)
+        runs += share
+    targets[k0:k0 + bump.periods] = sigma * (ds[k0:k0 + bump.periods] - e * taken)
+    return targets, e, runs
 
 
 def interpolate(plan: Plan, method: str = "rk2c") -> Interpolation:
-    """Step along the planned curve with `method`; see the module docstring."""
+    """Step along the planned curve with `method`; see the module docstring.
+
+    Every stretch between rests is sampled from the time law at its periods, stepped and landed
+    in place in the curve's arrays.
+    """
     curve = plan.curve
     law = plan.law
     period = plan.limits.period_s
@@ -286,47 +475,66 @@ def interpolate(plan: Plan, method: str = "rk2c") -> Interpolation:
     mean_speed = plan.length_mm / (curve.u_max - curve.u_min)
     slow = SLOW_SPEED_REL * mean_speed
     key_u = plan.key_u
-    us, pts, dss, ts, vs, accs, jerks, sigmas = ([curve.u_min], [curve.points[:1]], [], [0.0],
-                                                 [], [], [], [])
-    runs, seconds = 0, 0.0
+    n_all = 1 + plan.n_periods
+    u_all = np.empty(n_all)
+    points = np.empty((n_all, 3))
+    ds_all = np.empty(n_all - 1)
+    v_all = np.zeros(n_all)
+    a_all = np.zeros(n_all)
+    j_all = np.zeros(n_all)
+    u_all[0] = curve.u_min
+    points[0] = curve.points[0]
+    sigmas, slowdowns = [], []
+    runs, seconds = 0.0, 0.0
+    k0 = 0  # index of the stretch's first point
     for p in range(len(plan.piece_periods)):
         n = int(plan.piece_periods[p])
-        k0, k1 = plan.piece_key[p], plan.piece_key[p + 1]
+        key_a, key_b = plan.piece_key[p], plan.piece_key[p + 1]
         if n == 0:
             continue
-        t_a, t_b = law.key_t_s[k0], law.key_t_s[k1]
-        # plan time of period k of this stretch: t_a + k (t_b - t_a) / n, exact at both ends
-        t_plan = t_a + np.arange(n + 1, dtype=float) * ((t_b - t_a) / n)
-        t_plan[-1] = t_b
-        ds = law.increments(t_plan)
+        t_plan, ds, v, a, j, drift = _sample_stretch(
+            law.t0_s, law.s0_mm, law.v0_mm_s, law.a0_mm_s2, law.jerk_mm_s3,
+            float(law.key_t_s[key_a]), float(law.key_t_s[key_b]), n, plan.grid.s_mm,
+            plan.grid.kappa_1_mm, method == "rk2c")
+        sigma = 1.0
+        total = float(ds.sum())
+        if method == "rk2c" and total > 0.0:
+            sigma = min(1.0, 1.0 - drift / total + LANDING_MARGIN_REL)
         last = p == len(plan.piece_periods) - 1
-        end_point = curve.points[-1] if last else curve.point(key_u[k1])
-        stretch = _step_stretch(curve, code, float(key_u[k0]), float(key_u[k1]),
-                                np.asarray(end_point, dtype=float), ds, slow,
-                                _sigma_guess(plan, method, t_plan, ds))
-        runs += stretch.runs
-        seconds += stretch.seconds
+        end_point = curve.points[-1] if last else curve.point(key_u[key_b])
+        start_point = points[k0].copy()  # the previous landing (or the curve start): exact
+        landing = _land(curve, code, float(key_u[key_a]), float(key_u[key_b]),
+                        np.asarray(end_point, dtype=float), ds, slow, sigma,
+                        _bump_window(law, t_plan), t_plan, u_all[k0:k0 + n + 1],
+                        points[k0:k0 + n + 1])
+        points[k0] = start_point
+        u_all[k0 + n] = key_u[key_b]
+        points[k0 + n] = end_point
+        runs += landing.runs
+        seconds += landing.seconds
         scale = float(plan.piece_scale[p])
-        _, v, a, j = law.at(t_plan[1:])
-        us.append(stretch.u[1:])
-        pts.append(stretch.points[1:])
-        dss.append(stretch.ds_mm)
-        vs.append(stretch.sigma * v / scale)
-        accs.append(stretch.sigma * a / scale**2)
-        jerks.append(stretch.sigma * np.broadcast_to(j, v.shape) / scale**3)
-        sigmas.append(stretch.sigma)
-    ds_all = np.concatenate(dss) if dss else np.zeros(0)
-    u_all = np.concatenate([np.asarray(x, dtype=float).ravel() for x in us])
-    points = np.concatenate(pts)
-    points[0] = curve.points[0]
-    n_all = u_all.size
+        s = landing.sigma
+        ds_all[k0:k0 + n] = landing.targets
+        v, a, j = v[1:], a[1:], j[1:]
+        if landing.bump is not None:  # the bump's own v, a, j at its points (see _Bump)
+            bump = slice(landing.bump.k0, landing.bump.k0 + landing.bump.periods)
+            vw, aw, jw = landing.bump.shape(t_plan[1:][bump])
+            e = landing.slowdown
+            v[bump] -= e * vw
+            a[bump] -= e * aw
+            j[bump] -= e * jw
+        v_all[k0 + 1:k0 + n + 1] = s * v / scale
+        a_all[k0 + 1:k0 + n + 1] = s * a / scale**2
+        j_all[k0 + 1:k0 + n + 1] = s * j / scale**3
+        sigmas.append(s)
+        slowdowns.append(landing.slowdown)
+        k0 += n
     s_all = np.concatenate([[0.0], np.cumsum(ds_all)])
     # at rest at the start (and at every stretch start): v = a = 0, the jerk of the first piece
     first_j = float(law.jerk_mm_s3[0]) if law.jerk_mm_s3.size else 0.0
     first_scale = float(plan.piece_scale[0]) if plan.piece_scale.size else 1.0
     first_sigma = sigmas[0] if sigmas else 1.0
-    v_all = np.concatenate([[0.0]] + vs)
-    a_all = np.concatenate([[0.0]] + accs)
-    j_all = np.concatenate([[first_sigma * first_j / first_scale**3]] + jerks)
+    j_all[0] = first_sigma * first_j / first_scale**3
     return Interpolation(method, period, u_all, points, np.arange(n_all, dtype=float) * period,
-                         s_all, v_all, a_all, j_all, ds_all, np.array(sigmas), runs, seconds)
+                         s_all, v_all, a_all, j_all, ds_all, np.array(sigmas),
+                         np.array(slowdowns), runs, seconds)

@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 
 from nurbsfeed.errors import CurveError, InputError
 from nurbsfeed.gcode import read_gcode
+from nurbsfeed.gcode.fanuc import NurbsCurveReader
 from nurbsfeed.gcode.linuxcnc import uniform_knots
 from nurbsfeed.program import CurveBlock, PassThrough
 
@@ -450,3 +451,55 @@ def test_mutated_programs_fail_only_with_input_errors(case: tuple[str, str]) -> 
             assert item.feed_u[0] == curve.u_min and len(item.feed_u) == len(item.feed_mm_s)
             assert all(v > 0 for v in item.feed_mm_s) and not any(math.isnan(v)
                                                                   for v in item.feed_mm_s)
+
+
+# ---- the control-point fast path reads like the words --------------------------------------------
+def outcome(text: str, dialect: str) -> object:
+    """Everything a read yields (or the error it raises), comparable with ==."""
+    try:
+        items = read(text, dialect)
+    except InputError as exc:
+        return type(exc).__name__, str(exc)
+    return [item.text if isinstance(item, PassThrough) else
+            (item.curve.degree, item.curve.knots.tolist(), item.curve.points.tolist(),
+             item.curve.weights.tolist(), item.curve.name, item.location, item.units, item.eol,
+             item.incremental, item.feed_word_after, item.feed_u.tolist(),
+             item.feed_mm_s.tolist()) for item in items]
+
+
+def without_fast_path(text: str, dialect: str) -> object:
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(NurbsCurveReader, "take_line", lambda self, line_text, line: False)
+        return outcome(text, dialect)
+
+
+FAST_PATH_CASES = {
+    "canonical": PREAMBLE + "G06.2 P4 K0. X0. Y0. Z0. R1. F600.\nK0. X1. Y2. Z0.5 R0.8\n"
+                 "K0. X2.5 Y2. Z0.5\nK0. X4. Y0.000 Z-.5 R1.25\nk.5 x5. y1. z0. r1.\n"
+                 "K1.\nK1.\nK1.\nK1.\nG1 X0.\n",
+    "crlf and two curves": (PREAMBLE + "G06.2 K0 X0 Y0 Z0\nK0 X1 Y1 Z0\nK0 X2 Y0 Z0\n"
+                            "K0 X3 Y1 Z0\nK1\nK1\nK1\nK1\nK0 X3 Y1 Z0\nK0 X4 Y2 Z0\nK0 X5 Y1 Z0"
+                            "\nK0 X6 Y0 Z0\nK1\nK1\nK1\nK1\nG0 Z5\n").replace("\n", "\r\n"),
+    "incremental": (PREAMBLE + "G91\nG06.2 K0 X0 Y0 Z0\nK0 X1. Y1. Z0\nK0 X1 Y-1 Z0\n"
+                    "K0 X1. Y1. Z0.\nK1\nK1\nK1\nK1\nG90\n"),
+    "weight zero": PREAMBLE + "G06.2 K0 X0 Y0 Z0\nK0 X1 Y1 Z0 R0\nK0 X2 Y0 Z0\n",
+    "knot decreasing": PREAMBLE + "G06.2 K0.5 X0 Y0 Z0\nK0.5 X1 Y1 Z0\nK0.2 X2 Y0 Z0\n",
+    "start not clamped": PREAMBLE + "G06.2 K0 X0 Y0 Z0\nK0.1 X1 Y1 Z0\nK0.2 X2 Y0 Z0\n",
+    "interior knot splits": PREAMBLE + ("G06.2 P3 K0 X0 Y0 Z0\nK0 X1 Y1 Z0\nK0 X2 Y0 Z0\n"
+                                        "K0.5 X3 Y1 Z0\nK0.5 X4 Y0 Z0\nK0.5 X5 Y1 Z0\n"),
+    "knots after closing": PREAMBLE + ("G06.2 P2 K0 X0 Y0 Z0\nK0 X1 Y1 Z0\nK1\nK0 X2 Y0 Z0\n"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(FAST_PATH_CASES))
+def test_control_point_fast_path_reads_like_the_words(name: str) -> None:
+    text = FAST_PATH_CASES[name]
+    assert outcome(text, "auto") == without_fast_path(text, "auto")
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(mutated_programs())
+def test_control_point_fast_path_reads_mutated_programs_like_the_words(case: tuple[str, str]
+                                                                       ) -> None:
+    text, dialect = case
+    assert outcome(text, dialect) == without_fast_path(text, dialect)

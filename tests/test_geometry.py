@@ -8,7 +8,7 @@ import pytest
 from nurbsfeed.errors import CurveError
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.geometry.arclength import simpson_lengths
-from nurbsfeed.geometry.kernel import eval_d1, find_span
+from nurbsfeed.geometry.kernel import eval_d1, find_span, point_d1, point_d2
 from nurbsfeed.geometry.nurbs import curvature_from_derivatives
 from nurbsfeed.planning.grid import build_grid
 from tests import naive_nurbs
@@ -77,7 +77,8 @@ def test_exact_circle_has_constant_curvature_radius_and_length() -> None:
 def test_adaptive_simpson_agrees_with_gauss_legendre_on_the_oracle(butterfly) -> None:
     nodes = np.array([0.0, 0.05, 0.37, 1.0])
     a, b = nodes[:-1], nodes[1:]
-    ours = simpson_lengths(butterfly.speed, nodes, butterfly.speed(nodes), np.full(3, 1e-10))
+    ours = np.diff(simpson_lengths(butterfly.knots, butterfly.span_polynomials, butterfly.degree,
+                                   nodes, butterfly.speed(nodes), 1e-10))
     for k in range(3):
         ref = naive_nurbs.length(3, butterfly.knots, butterfly.points, butterfly.weights,
                                  a[k], b[k], n=200)
@@ -118,3 +119,57 @@ def test_invalid_curves_are_rejected_naming_field_and_value(fields, message) -> 
         NurbsCurve.build(fields["degree"], fields["knots"], fields["points"],
                          fields.get("weights"))
     assert str(err.value) == message
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_span_polynomials_match_the_oracle_at_knots_and_extrapolate_smoothly(seed: int) -> None:
+    """The stepping loop's and the grid's evaluation (Taylor expansions of each span at both
+    ends): the oracle's values at every knot, from either side's expansion, and beyond the ends
+    the end spans' polynomials continue (C and C' continuous at u_min and u_max)."""
+    rng = np.random.default_rng(100 + seed)
+    curve = random_curve(rng)
+    p, knots, coef = curve.degree, curve.knots, curve.span_polynomials
+    scale = np.max(np.abs(curve.points)) + 1.0
+    width = curve.u_max - curve.u_min
+    for uk in np.concatenate([curve.span_breaks, rng.uniform(curve.u_min, curve.u_max, 8)]):
+        span = find_span(knots, p, curve.n_ctrl, uk, -1)
+        n0, n1, n2 = naive_nurbs.evaluate(p, knots, curve.points, curve.weights, uk)
+        got = np.array(point_d2(knots, coef, p, span, uk)).reshape(3, 3)
+        dscale = scale * (1 + np.linalg.norm(n1))
+        assert np.allclose(got[0], n0, atol=1e-9 * scale)
+        assert np.allclose(got[1], n1, atol=1e-8 * dscale)
+        assert np.allclose(got[2], n2, atol=1e-7 * dscale * (1 + np.linalg.norm(n2)))
+        assert np.array_equal(np.array(point_d1(knots, coef, p, span, uk)), got[:2].ravel())
+    for end, span in ((curve.u_min, p), (curve.u_max, curve.n_ctrl - 1)):
+        inside = np.array(point_d1(knots, coef, p, span, end)).reshape(2, 3)
+        for side in (-1.0, 1.0):
+            u = end + side * 1e-9 * width
+            beyond = np.array(point_d1(knots, coef, p, span, u)).reshape(2, 3)
+            assert np.allclose(beyond[0], inside[0] + (u - end) * inside[1], atol=1e-9 * scale)
+
+
+def test_a_repeated_end_control_point_gives_c_prime_exactly_zero() -> None:
+    """SPEC §3a: C'(u) = 0 where control points repeat, exactly, so that the grid sees it."""
+    knots = [0, 0, 0, 0, 0.4, 1, 1, 1, 1]
+    curve = NurbsCurve.build(3, knots, [[0, 0], [0, 0], [20, 10], [40, -5], [60, 0]])
+    _, c1, _ = curve.derivatives(np.array([curve.u_min]))
+    assert np.all(c1 == 0.0)
+    assert np.all(curve.point(np.array([curve.u_min, curve.u_max]))
+                  == curve.points[[0, -1]])
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_refined_curvature_peaks_are_the_maxima_around_them(seed: int) -> None:
+    """Zoom sampling then golden section: no curvature between the peak's neighbouring nodes,
+    sampled densely, is higher than the refined peak's (kappa_floor 0: every peak refined;
+    the rounding noise of straight pieces, kappa ~ 1e-18, is no peak to check)."""
+    curve = random_curve(np.random.default_rng(200 + seed))
+    grid = build_grid(curve, 0.05 * curve.speed(np.array([curve.u_min]))[0] + 0.01, np.empty(0),
+                      0.0)
+    for node in grid.peak_index:
+        if not (0 < node < grid.u.size - 1 and 1e-9 < grid.kappa_1_mm[node] < np.inf):
+            continue
+        u = np.linspace(grid.u[node - 1], grid.u[node + 1], 2001)
+        _, c1, c2 = curve.derivatives(u)
+        dense = np.nanmax(curvature_from_derivatives(c1, c2))
+        assert grid.kappa_1_mm[node] >= dense * (1 - 1e-9)

@@ -8,7 +8,7 @@ import pytest
 from nurbsfeed.analysis import time_optimal_bound_s
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.geometry.nurbs import curvature_from_derivatives
-from nurbsfeed.interpolate import METHODS, interpolate
+from nurbsfeed.interpolate import BUMP_MAX_SLOWDOWN, BUMP_PERIODS, METHODS, interpolate
 from nurbsfeed.planning.limits import Limits, curvature_threshold
 from nurbsfeed.planning.planner import KIND_PEAK, plan_curve
 from tests import naive_nurbs
@@ -203,3 +203,39 @@ def test_programmed_feed_caps_each_span_from_its_start(paper_limits) -> None:
     first = result.points[:, 0] < 50 - 1e-9
     assert result.v_mm_s[first].max() == pytest.approx(80.0, rel=1e-3)
     assert result.v_mm_s[~first].max() <= 30.0 * (1 + 1e-9)
+
+
+def test_rk2c_lands_with_a_bump_in_the_last_cruise_that_raises_nothing(butterfly_plan,
+                                                                        butterfly_runs) -> None:
+    """The landing (interpolate's module docstring): one full run with targets sigma * ds, then
+    a short run from a slowdown bump in the last cruise on. The bump only lowers targets, over
+    BUMP_PERIODS steps, by a relative e ~ 1e-6, and its own a and j are negligible."""
+    plan, result = butterfly_plan, butterfly_runs["rk2c"]
+    (e,) = result.slowdown
+    assert 0.0 < e <= BUMP_MAX_SLOWDOWN and e < 1e-4
+    assert result.landing_runs < 1.5
+    law = plan.law
+    n = plan.n_periods
+    t_plan = np.arange(n + 1) * (law.duration_s / n)
+    t_plan[-1] = law.duration_s
+    ratio = result.ds_mm / (result.sigma[0] * law.increments(t_plan))
+    assert np.all(ratio <= 1.0 + 1e-12)
+    lowered = np.flatnonzero(ratio < 1.0 - 1e-12)
+    assert lowered.size and lowered[-1] - lowered[0] < BUMP_PERIODS
+    assert lowered[-1] < n - 1
+    # in the bump the law cruised (a = j = 0): what is left is the bump's, e v_c pi / D etc.
+    bump = slice(lowered[0], lowered[-1] + 2)
+    assert np.max(np.abs(result.a_mm_s2[bump])) < 1e-3 * plan.limits.acc_mm_s2
+    assert np.max(np.abs(result.j_mm_s3[bump])) < 1e-3 * plan.limits.jerk_mm_s3
+    chord_v = np.linalg.norm(np.diff(result.points, axis=0), axis=1) / plan.limits.period_s
+    assert np.allclose(chord_v[bump], result.v_mm_s[1:][bump], rtol=1e-3)
+
+
+def test_a_stretch_without_a_cruise_lands_by_sigma_alone(paper_limits) -> None:
+    curve = line([[0, 0], [3, 0]])  # too short to reach the feed: no cruise to put a bump in
+    plan = plan_curve(curve, paper_limits)
+    result = interpolate(plan)
+    assert result.slowdown.tolist() == [0.0]
+    assert 1 - 1e-5 < result.sigma[0] <= 1.0
+    assert np.array_equal(result.points[-1], curve.points[-1])
+    assert float(result.feed_fluctuation().max()) <= 1e-5

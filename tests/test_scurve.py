@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from nurbsfeed.planning.scurve import (peak_speed, reachable_speed, scan_speeds,
                                        transition_distance_mm, transition_phases,
                                        transition_time_s)
-from nurbsfeed.planning.timelaw import TimeLaw
+from nurbsfeed.planning.timelaw import TimeLaw, speed_at_arc
 
 speeds = st.floats(0.0, 500.0)
 accs = st.floats(1.0, 1e4)
@@ -120,3 +120,29 @@ def test_time_law_is_continuous_and_respects_the_tangential_limits() -> None:
     inc = law.increments(t)
     assert np.allclose(inc, np.diff(s), atol=1e-9)
     assert np.allclose(law.speed_at_arc(s[1:-1]), v[1:-1], atol=1e-6)
+    # in any order (binary search instead of the forward pointer): the same speeds
+    shuffled = np.random.default_rng(4).permutation(s.size - 2) + 1
+    assert np.allclose(law.speed_at_arc(s[shuffled]), v[shuffled], atol=1e-6)
+    assert np.allclose(law.at(t[shuffled])[1], v[shuffled], atol=1e-12)
+
+
+def test_speed_at_arc_skips_only_pieces_that_cannot_exceed_the_floor() -> None:
+    """What the planner checks: v at a node is worked out only where the law's piece can be
+    faster than the node's limit (its speeds at both ends and any turning point bound it)."""
+    acc, jerk = 1000.0, 1e4
+    s_key = np.array([0.0, 30.0, 45.0, 80.0])
+    v_key = np.array([0.0, 60.0, 35.0, 0.0])
+    length = np.diff(s_key)
+    peak = np.array([peak_speed(v_key[i], v_key[i + 1], length[i], 100.0, acc, jerk)
+                     for i in range(3)])
+    law = TimeLaw.from_segments(s_key, v_key, peak, np.zeros(3), np.zeros(3), acc, jerk)
+    s = np.linspace(0.0, s_key[-1], 4001)
+    full = law.speed_at_arc(s)
+    floor = np.random.default_rng(5).uniform(0.0, 100.0, s.size)
+    out = np.empty(s.size)
+    speed_at_arc(law.t0_s, law.s0_mm, law.v0_mm_s, law.a0_mm_s2, law.jerk_mm_s3,
+                 law.duration_s, s, floor, out)
+    solved = out > 0.0
+    assert np.allclose(out[solved], full[solved], rtol=1e-10, atol=0.0)  # Newton to 1e-12
+    assert np.all(full[~solved] <= floor[~solved] * (1 + 1e-12))  # skipped: cannot exceed
+    assert np.all(solved[full > floor])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import math
 import re
 
 import numpy as np
@@ -95,3 +96,53 @@ def test_chunked_writing_equals_one_shot_writing() -> None:
     for lo in range(1, len(pts), 7919):
         writer.write(pts[lo:lo + 7919])
     assert out.getvalue().decode() == whole
+
+
+def reference_moves(points: np.ndarray, start: np.ndarray, decimals: int, feed_decimals: int,
+                    period_s: float, eol: str) -> str:
+    """SPEC §5 written out plainly, one point at a time, with Python's own formatting."""
+    def ticks(x: float) -> int:
+        scaled = x * 10.0**decimals
+        return int(math.copysign(math.floor(abs(scaled) + 0.5), scaled))
+
+    def text(value: int, digits: int) -> str:
+        whole, frac = divmod(abs(value), 10**digits)
+        fraction = f"{frac:0{digits}d}".rstrip("0") if digits else ""
+        return f"{'-' if value < 0 else ''}{whole}.{fraction}"
+
+    last, pending, last_feed, lines = [ticks(v) for v in start], 0, None, []
+    for point in points:
+        now = [ticks(v) for v in point]
+        pending += 1
+        if now == last:
+            continue
+        dist = math.sqrt(sum(float(a - b) ** 2 for a, b in zip(now, last))) * 10.0**-decimals
+        feed = 60.0 * dist / (pending * period_s)
+        feed_dec = int(min(max(4 - math.floor(math.log10(feed)), feed_decimals), 6))
+        feed_text = text(math.floor(feed * 10.0**feed_dec + 0.5), feed_dec)
+        words = [f"{axis}{text(v, decimals)}" for axis, v, was in zip("XYZ", now, last)
+                 if v != was]
+        if feed_text != last_feed:
+            words.append("F" + feed_text)
+            last_feed = feed_text
+        lines.append(("" if lines else "G1 ") + " ".join(words) + eol)
+        last, pending = now, 0
+    return "".join(lines)
+
+
+@pytest.mark.parametrize("seed, decimals, feed_decimals, period_s, eol", [
+    (0, 4, 3, 0.001, "\n"), (1, 3, 2, 0.0005, "\r\n"), (2, 5, 3, 0.002, "\n"),
+    (3, 0, 0, 0.001, "\n"), (4, 4, 6, 0.004, "\n")])
+def test_moves_match_a_plain_reference_writer(seed, decimals, feed_decimals, period_s,
+                                             eol) -> None:
+    rng = np.random.default_rng(seed)
+    slow = slow_start_path(2000) * rng.uniform(0.1, 50.0)
+    jumps = rng.normal(0.0, 30.0, (300, 3))  # sign changes, values near 0, big moves
+    creep = np.cumsum(rng.normal(0.0, 10.0**-decimals, (500, 3)), axis=0)
+    points = np.vstack([slow, jumps, creep])
+    out = io.BytesIO()
+    writer = MoveWriter(out, decimals, feed_decimals, period_s, eol, points[0])
+    for lo in range(1, len(points), 997):
+        writer.write(points[lo:lo + 997])
+    expected = reference_moves(points[1:], points[0], decimals, feed_decimals, period_s, eol)
+    assert out.getvalue().decode("ascii") == expected

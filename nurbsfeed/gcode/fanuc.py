@@ -43,6 +43,9 @@ incremental G91 control points refused, since their meaning is not documented fo
 
 from __future__ import annotations
 
+import math
+import re
+
 from nurbsfeed.errors import CurveError, InputError
 from nurbsfeed.gcode.modal import AXES, G6_2, AxisPos, ModalState, tolerance
 from nurbsfeed.gcode.nurbs_block import (
@@ -58,10 +61,14 @@ from nurbsfeed.gcode.nurbs_block import (
     motion_words,
     point_text,
 )
-from nurbsfeed.gcode.tokenizer import Block, Word
+from nurbsfeed.gcode.tokenizer import PLAIN_NUMBER, Block, Word, decimals_written
 
 DEFAULT_ORDER = 4
 FANUC_ORDERS = range(2, 5)  # P2..P4 (15i manual: "The valid data range for P is 2 to 4")
+_POINT_LETTERS = frozenset("KXYZRF")
+# What CAM posts write for nearly every line of a curve (see NurbsCurveReader.take_line).
+_POINT_LINE = re.compile(rf"[Kk]({PLAIN_NUMBER}) [Xx]({PLAIN_NUMBER}) [Yy]({PLAIN_NUMBER}) "
+                         rf"[Zz]({PLAIN_NUMBER})(?: [Rr]({PLAIN_NUMBER}))?\r?\n?")
 
 
 class NurbsCurveReader:
@@ -79,6 +86,9 @@ class NurbsCurveReader:
         self.points: list[tuple[float, float, float]] = []
         self.weights: list[float] = []
         self.decimals: dict[str, int | None] = {}
+        # the X, Y, Z texts of the last `take_line`, whose decimals are worked out only when
+        # they are wanted (the last point's set the position the curve leaves)
+        self.decimal_texts: tuple[str, str, str] | None = None
         self.feed_before = state.feed
         self.feed = state.feed
         self.changes: list[FeedChange] = []
@@ -117,8 +127,48 @@ class NurbsCurveReader:
         self._control_point(block)
 
     # ---- every further block -------------------------------------------------------------------
+    def take_line(self, line_text: str, line: int) -> bool:
+        """`take` for the commonest line of a curve, read straight from its text without words
+        and blocks: "K_ X_ Y_ Z_ [R_]", one space apart, before the knot-only blocks. Reads it
+        exactly as `take` would read its block (same checks, same errors) and returns True;
+        returns False, having read nothing, for any other line or a weight `take` rejects."""
+        if self.n_closing:
+            return False
+        match = _POINT_LINE.fullmatch(line_text)
+        if match is None:
+            return False
+        k_text, x_text, y_text, z_text, r_text = match.groups()
+        k, x, y, z = float(k_text), float(x_text), float(y_text), float(z_text)
+        weight = 1.0 if r_text is None else float(r_text)
+        if not (math.isfinite(k + x + y + z + weight) and weight > 0.0):
+            return False
+        knot = Word("K", k, k_text, decimals_written(k_text), line, 1)
+        if k > self.knots[-1] and len(self.knots) >= self.order:
+            self.knots.append(k)  # past the clamped start and increasing: _knot has no check
+            self.knot_words.append(knot)
+        else:
+            self._knot(knot, closing=False)
+        if self.state.incremental:
+            previous = self.points[-1]
+            x, y, z = previous[0] + x, previous[1] + y, previous[2] + z
+        self.decimal_texts = (x_text, y_text, z_text)
+        self.points.append((x, y, z))
+        self.weights.append(weight)
+        return True
+
     def take(self, block: Block) -> bool:
         """Read the next block of the curve; True when it was the last knot-only block."""
+        words = block.words
+        if not self.n_closing and not block.assignments and words:
+            # The bulk of a curve: control-point blocks of K, X, Y, Z, R, F words, each at most
+            # once, and the knot-only blocks. Every check below passes for them.
+            letters = {word.letter for word in words}
+            if len(letters) == len(words) and letters <= _POINT_LETTERS and "K" in letters:
+                if not letters.isdisjoint(AXES):
+                    self._control_point(block)
+                    return False
+                if len(words) == 1:
+                    return self._closing_knot(words[0])
         if block.is_inert:
             return False
         state = self.state
@@ -157,9 +207,19 @@ class NurbsCurveReader:
                 "alarm PS1005)")
 
     # ---- control points and knots ----------------------------------------------------------------
+    def _flush_decimal_texts(self) -> None:
+        if self.decimal_texts is not None:
+            for axis, text in zip(AXES, self.decimal_texts):
+                self.decimals[axis] = decimals_written(text)
+            self.decimal_texts = None
+
     def _control_point(self, block: Block) -> None:
         state = self.state
-        knot = block.first("K")
+        self._flush_decimal_texts()
+        first: dict[str, Word] = {}
+        for word in reversed(block.words):
+            first[word.letter] = word
+        knot = first.get("K")
         if knot is None:
             word = next((word for word in block.words if word.letter in AXES + ("R", "F")),
                         first_word(block))
@@ -167,11 +227,13 @@ class NurbsCurveReader:
                              f"{self.label} curve carries K (Fanuc alarm PS1002)",
                              state.where(word))
         self._knot(knot, closing=False)
-        weight = block.first("R")
+        weight = first.get("R")
         if weight is not None and weight.value <= 0:
             raise CurveError(f"{weight.name}: a weight R must be positive", state.where(weight))
-        x, y, z = (self._coordinate(axis, block.first(axis)) for axis in AXES)
-        feed = block.first("F")
+        x = self._coordinate("X", first.get("X"))
+        y = self._coordinate("Y", first.get("Y"))
+        z = self._coordinate("Z", first.get("Z"))
+        feed = first.get("F")
         if feed is not None:
             self.feed = state.apply_feed(feed)
             self.changes.append(FeedChange(knot.value, self.feed, feed))
@@ -258,6 +320,7 @@ class NurbsCurveReader:
                           self.location)
 
     def finish(self) -> FinishedCurve:
+        self._flush_decimal_texts()
         curve = build_curve(self.order - 1, self.knots, self.points, self.weights, self.name,
                             self.location)
         feed_u, feed_mm_s = feed_steps(curve.u_min, curve.u_max, self.feed_before, self.changes,

@@ -1,6 +1,8 @@
 """G-code program -> stream of PassThrough lines and CurveBlocks (program.py), line by line.
 
-Call chain for one line: `tokenizer.tokenize_line` -> if a NURBS block is open, its reader
+Call chain for one line: `tokenizer.tokenize_line` (for a plain "K_ X_ Y_ Z_ [R_]" line inside
+a G06.2 curve, `fanuc.NurbsCurveReader.take_line` reads the text directly instead, with the same
+result) -> if a NURBS block is open, its reader
 (`fanuc.NurbsCurveReader` or `linuxcnc.G52BlockReader`) takes the block, and the CurveBlock is
 yielded when the block completes; otherwise `_start` decides whether the block opens a NURBS
 block, and if not `modal.ModalState.apply` executes it and the line passes through unchanged.
@@ -58,6 +60,8 @@ class _Reader:
 
     def items(self, text: str) -> Iterator[ProgramItem]:
         for line, line_text in iter_lines(text):
+            if isinstance(self.open, NurbsCurveReader) and self.open.take_line(line_text, line):
+                continue  # a plain control point, read straight from the text
             block = tokenize_line(line_text, line, self.path, self.params)
             if self.open is not None:
                 if self.open.take(block):

@@ -6,13 +6,15 @@ written move, so every move lasts n * T with n >= 1 (n > 1 only near standstill)
 60 |dP^| / (n T) from the *rounded* coordinates, so the controller spends exactly the planned time
 on every move. Only axes that change and F words that change are written (modal words).
 
-Numbers are integers of output units ("ticks") turned into text by `_emit_lines`, a loop in
-numba's subset: always a decimal point, trailing zeros dropped (`50.`, `12.34`), never `-0.`.
-F is written with `feed_decimals`, or more when F is small, so that it keeps 5 significant digits.
+All of it runs in one loop in numba's subset, `_emit_moves`, point by point: round to integers
+of output units ("ticks"), drop a point equal to the last written one, compute F, and write the
+text: always a decimal point, trailing zeros dropped (`50.`, `12.34`), never `-0.`. F is written
+with `feed_decimals`, or more when F is small, so that it keeps 5 significant digits.
 """
 
 from __future__ import annotations
 
+import math
 from typing import BinaryIO
 
 import numpy as np
@@ -24,84 +26,154 @@ FEED_MAX_DECIMALS = 6
 CHUNK_POINTS = 65536  # points formatted per call: bounds the text buffer
 _BYTES_PER_LINE = 4 + 3 * 23 + 24 + 2
 
-_G = ord("G")
-_ONE = ord("1")
-_SPACE = ord(" ")
 _AXES = np.array([ord("X"), ord("Y"), ord("Z")], dtype=np.uint8)
-_F = ord("F")
+_POW10 = np.array([10**k for k in range(20)], dtype=np.uint64)
+_ONES = np.array([48 + k % 10 for k in range(100)], dtype=np.uint8)  # "00".."99", digit by digit
+_TENS = np.array([48 + k // 10 for k in range(100)], dtype=np.uint8)
 
 
 @jit
 def _emit_number(buf, pos, value, decimals):
-    """Write integer `value` * 10^-decimals as text at buf[pos:]; return the new position."""
+    """Write integer `value` * 10^-decimals as text at buf[pos:]; return the new position.
+
+    The digits are taken right to left from the magnitude as an unsigned integer (division by
+    a constant is then a multiplication), two at a time from a table of "00".."99", after the
+    fraction's trailing zeros are dropped; digit i from the right sits at end - 1 - i, one
+    further left once past the point.
+    """
     if value < 0:
         buf[pos] = 45  # '-'
         pos += 1
         value = -value
-    scale = 1
-    for _ in range(decimals):
-        scale *= 10
-    whole = value // scale
-    frac = value - whole * scale
-    # integer part, most significant digit first
-    digits = 1
-    probe = whole
-    while probe >= 10:
-        probe //= 10
-        digits += 1
-    for i in range(digits - 1, -1, -1):
-        buf[pos + i] = 48 + whole % 10
-        whole //= 10
-    pos += digits
-    buf[pos] = 46  # '.'
-    pos += 1
-    if frac > 0:
-        width = decimals
-        while frac % 10 == 0:
-            frac //= 10
-            width -= 1
-        for i in range(width - 1, -1, -1):
-            buf[pos + i] = 48 + frac % 10
-            frac //= 10
-        pos += width
-    return pos
+    ten = np.uint64(10)
+    hundred = np.uint64(100)
+    digits = np.uint64(value)
+    width = decimals  # fraction digits written
+    while width > 0 and digits % ten == 0:
+        digits //= ten
+        width -= 1
+    n = width + 1  # at least one integer digit, "0." and "0.5"
+    while n < _POW10.size and digits >= _POW10[n]:
+        n += 1
+    end = pos + n + 1
+    buf[end - 1 - width] = 46  # '.'
+    i = 0
+    while i + 1 < n:
+        pair = digits % hundred
+        digits //= hundred
+        buf[end - 1 - i - (1 if i >= width else 0)] = _ONES[pair]
+        buf[end - 2 - i - (1 if i + 1 >= width else 0)] = _TENS[pair]
+        i += 2
+    if i < n:
+        buf[end - 1 - i - (1 if i >= width else 0)] = np.uint8(digits) + 48
+    return end
 
 
 @jit
-def _emit_lines(ticks, changed, feed_ticks, feed_dec, write_feed, first_g1, decimals,
-                axes, eol, buf):
-    """One line per row: [G1 ]X.. Y.. Z.. [F..]. ticks (M, 3) int64, changed (M, 3) bool,
-    feed_ticks / feed_dec (M,) int64, write_feed (M,) bool. Returns the bytes used in buf."""
+def _round_tick(value, scale):
+    """value * scale rounded to an integer, half away from zero."""
+    scaled = value * scale
+    whole = int(math.floor(abs(scaled) + 0.5))
+    return -whole if scaled < 0.0 else whole
+
+
+@jit
+def _round_many(values, scale, out):
+    """`_round_tick` of every value: values, out (M,)."""
+    for q in range(values.size):
+        out[q] = _round_tick(values[q], scale)
+
+
+# _emit_moves' state between calls (an int64 array): the last written point in ticks, the
+# periods since it, the last F (ticks * 10^(FEED_MAX_DECIMALS - decimals); -1: none yet), whether
+# the next line is the curve's first, and the moves written
+_X, _Y, _Z, _PENDING, _FEED, _FIRST, _MOVES = range(7)
+
+
+@jit
+def _emit_moves(points, decimals, scale, unit, period_s, feed_decimals, pow10, eol, axes, state,
+                buf):
+    """Write the G1 lines of points (M, 3), which follow the state's last point one period
+    apart, into buf; return the bytes used. scale = 10^decimals, unit = 10^-decimals; pow10[k]
+    = 10^k for the F decimals k.
+
+    A point whose ticks equal the last written ones only adds its period to the next move.
+    F = 60 |dP^| / (n T) from the ticks, written with the decimals that keep
+    FEED_SIGNIFICANT_DIGITS (at least feed_decimals, at most FEED_MAX_DECIMALS). Only changed
+    axes and a changed F are written; the curve's first line starts with G1.
+    """
+    # at or above this F, feed_decimals already keep the significant digits (with a margin that
+    # log10's rounding cannot cross)
+    plain_feed = 10.0 ** (FEED_SIGNIFICANT_DIGITS - 1 - feed_decimals) * (1.0 + 1e-9)
+    lx = state[_X]
+    ly = state[_Y]
+    lz = state[_Z]
+    pending = state[_PENDING]
+    last_feed = state[_FEED]
     pos = 0
-    for k in range(ticks.shape[0]):
+    for k in range(points.shape[0]):
+        tx = _round_tick(points[k, 0], scale)
+        ty = _round_tick(points[k, 1], scale)
+        tz = _round_tick(points[k, 2], scale)
+        pending += 1
+        if tx == lx and ty == ly and tz == lz:
+            continue
+        dx = float(tx - lx)
+        dy = float(ty - ly)
+        dz = float(tz - lz)
+        feed = 60.0 * (math.sqrt(dx * dx + dy * dy + dz * dz) * unit) / (pending * period_s)
+        feed_dec = feed_decimals
+        if feed < plain_feed:  # only then can more decimals be needed
+            magnitude = math.floor(math.log10(feed))
+            feed_dec = int(min(max(FEED_SIGNIFICANT_DIGITS - 1 - magnitude, feed_decimals),
+                               FEED_MAX_DECIMALS))
+        feed_ticks = int(math.floor(feed * pow10[feed_dec] + 0.5))
+        # equal text <=> equal ticks / 10^decimals: compare at FEED_MAX_DECIMALS
+        feed_norm = feed_ticks * int(pow10[FEED_MAX_DECIMALS - feed_dec])
         first = True
-        if k == 0 and first_g1:
+        if state[_FIRST]:
             buf[pos] = 71  # 'G'
             buf[pos + 1] = 49  # '1'
             pos += 2
             first = False
+            state[_FIRST] = 0
         for axis in range(3):
-            if changed[k, axis]:
+            tick = tx if axis == 0 else (ty if axis == 1 else tz)
+            last = lx if axis == 0 else (ly if axis == 1 else lz)
+            if tick != last:
                 if not first:
                     buf[pos] = 32
                     pos += 1
                 first = False
                 buf[pos] = axes[axis]
-                pos = _emit_number(buf, pos + 1, ticks[k, axis], decimals)
-        if write_feed[k]:
+                pos = _emit_number(buf, pos + 1, tick, decimals)
+        if feed_norm != last_feed:
             buf[pos] = 32
             buf[pos + 1] = 70  # 'F'
-            pos = _emit_number(buf, pos + 2, feed_ticks[k], feed_dec[k])
+            pos = _emit_number(buf, pos + 2, feed_ticks, feed_dec)
+            last_feed = feed_norm
         for b in range(eol.size):
             buf[pos] = eol[b]
             pos += 1
+        lx = tx
+        ly = ty
+        lz = tz
+        pending = 0
+        state[_MOVES] += 1
+    state[_X] = lx
+    state[_Y] = ly
+    state[_Z] = lz
+    state[_PENDING] = pending
+    state[_FEED] = last_feed
     return pos
 
 
 def round_ticks(points: np.ndarray, decimals: int) -> np.ndarray:
     """(N, 3) coordinates -> (N, 3) int64 in units of 10^-decimals (round half away from 0)."""
-    scaled = points * 10.0**decimals
-    return (np.sign(scaled) * np.floor(np.abs(scaled) + 0.5)).astype(np.int64)
+    values = np.ascontiguousarray(points, dtype=float)
+    out = np.empty(values.shape, dtype=np.int64)
+    _round_many(values.reshape(-1), 10.0**decimals, out.reshape(-1))
+    return out
 
 
 class MoveWriter:
@@ -111,57 +183,33 @@ class MoveWriter:
                  eol: str, start: np.ndarray) -> None:
         self.out = out
         self.decimals = decimals
+        self.scale = 10.0**decimals
+        self.unit = 10.0**-decimals
         self.feed_decimals = feed_decimals
         self.period_s = period_s
         self.eol = np.frombuffer(eol.encode("ascii"), dtype=np.uint8)
-        self.last_ticks = round_ticks(np.asarray(start, dtype=float)[None, :], decimals)[0]
-        self.periods_pending = 0  # periods since the last written point
-        self.last_feed = (-1, -1)
-        self.first = True
-        self.moves = 0
+        self.pow10 = 10.0 ** np.arange(FEED_MAX_DECIMALS + 1)
+        self.state = np.zeros(7, dtype=np.int64)
+        self.state[:3] = round_ticks(np.asarray(start, dtype=float)[None, :], decimals)[0]
+        self.state[_FEED] = -1
+        self.state[_FIRST] = 1
+        self.buf = np.empty(0, dtype=np.uint8)
+
+    @property
+    def moves(self) -> int:
+        return int(self.state[_MOVES])
 
     def write(self, points: np.ndarray) -> None:
         """Points (N, 3) that follow the previous ones, one period apart."""
+        points = np.ascontiguousarray(points, dtype=float)
+        size = min(len(points), CHUNK_POINTS) * _BYTES_PER_LINE
+        if self.buf.size < size:
+            self.buf = np.empty(size, dtype=np.uint8)
         for lo in range(0, len(points), CHUNK_POINTS):
-            self._write_chunk(points[lo:lo + CHUNK_POINTS])
-
-    def _write_chunk(self, points: np.ndarray) -> None:
-        ticks = round_ticks(points, self.decimals)
-        prev = np.vstack([self.last_ticks[None, :], ticks[:-1]])
-        # a point equal (as written) to the one before is dropped; consecutive duplicates
-        # collapse, so comparing with the previous row is comparing with the last written one
-        moved = np.any(ticks != prev, axis=1)
-        index = np.flatnonzero(moved)
-        periods = np.diff(np.concatenate([[-1 - self.periods_pending], index]))
-        self.periods_pending = len(points) - 1 - (index[-1] if index.size else
-                                                  -1 - self.periods_pending)
-        if index.size == 0:
-            return
-        kept = ticks[index]
-        before = np.vstack([self.last_ticks[None, :], kept[:-1]])
-        changed = kept != before
-        dist = np.linalg.norm((kept - before).astype(float), axis=1) * 10.0**-self.decimals
-        feed = 60.0 * dist / (periods * self.period_s)
-        magnitude = np.floor(np.log10(feed))
-        feed_dec = np.clip(FEED_SIGNIFICANT_DIGITS - 1 - magnitude, self.feed_decimals,
-                           FEED_MAX_DECIMALS).astype(np.int64)
-        feed_ticks = np.floor(feed * 10.0**feed_dec + 0.5).astype(np.int64)
-        # F ticks at their decimals: equal text <=> equal (ticks / 10^dec), compare normalised
-        norm = feed_ticks * 10 ** (FEED_MAX_DECIMALS - feed_dec)
-        prev_norm = np.concatenate([[self._last_norm()], norm[:-1]])
-        write_feed = norm != prev_norm
-        buf = np.empty(len(kept) * _BYTES_PER_LINE, dtype=np.uint8)
-        used = _emit_lines(kept, changed, feed_ticks, feed_dec, write_feed, self.first,
-                           self.decimals, _AXES, self.eol, buf)
-        self.out.write(buf[:used].tobytes())
-        self.first = False
-        self.last_ticks = kept[-1]
-        self.last_feed = (int(feed_ticks[-1]), int(feed_dec[-1]))
-        self.moves += len(kept)
-
-    def _last_norm(self) -> int:
-        ticks, dec = self.last_feed
-        return -1 if dec < 0 else ticks * 10 ** (FEED_MAX_DECIMALS - dec)
+            used = _emit_moves(points[lo:lo + CHUNK_POINTS], self.decimals, self.scale,
+                               self.unit, self.period_s, self.feed_decimals, self.pow10,
+                               self.eol, _AXES, self.state, self.buf)
+            self.out.write(self.buf[:used])
 
 
 def format_number(value: float, decimals: int) -> str:

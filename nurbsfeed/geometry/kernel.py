@@ -1,12 +1,28 @@
-"""Single-parameter NURBS evaluation for the stepping loop, in numba's subset.
+"""Single-parameter NURBS evaluation in numba's subset: the span polynomials and their evaluation.
 
-`eval_d1` returns C(u) and C'(u) in preallocated arrays; the basis functions and their first
-derivatives come from Piegl & Tiller A2.2 carried to degree p-1, differentiated, then raised to
-degree p. Outside [u_min, u_max] the end spans' polynomials extrapolate, which keeps the end-landing
-search of `interpolate` continuous.
+On each knot span the homogeneous curve A(u) = sum N_i,p(u) w_i P_i, W(u) = sum N_i,p(u) w_i is one
+polynomial of degree p, so it is stored once as its Taylor expansions at both ends of the span:
+
+    coef[i, 0, k, :] = (A, W)^(k)(knots[i]) / k!     coef[i, 1, k, :] = (A, W)^(k)(knots[i+1]) / k!
+
+(k = 0..p, `span_polynomials`; the derivatives from Piegl & Tiller A2.3, `_basis_ders`). An
+evaluation takes the expansion at the nearer end and runs Horner's rule in t = u - knot for the
+value and its derivatives, then the quotient rule (A4.2): C = A/W, C' = (A' - W'C)/W,
+C'' = (A'' - 2W'C' - W''C)/W (`point_d1`, `point_d2`). That costs a third of evaluating the basis
+functions at every parameter, which the stepping loop and the planning grid do millions of times.
+Two expansions, not one: |t| stays below half the span, and at every knot the value is the one
+A2.3 gives there, so a derivative that vanishes at a knot (a repeated control point, SPEC §3a)
+comes out exactly 0, not as rounding noise. Outside [u_min, u_max] the end spans' polynomials
+extrapolate, which keeps the end-landing search of `interpolate` continuous.
+
+`eval_d1` evaluates C and C' from the basis functions directly (A2.2 carried to degree p-1,
+differentiated, then raised to degree p): the independent route that `analysis.check` verifies a
+converted program with.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -145,41 +161,163 @@ def _basis_ders(knots, p, span, u, n, ndu, a, left, right, ders):
 
 
 @jit
-def eval_many(knots, cw, degree, u, order, out):
+def span_polynomials(knots, cw, degree):
+    """Taylor coefficients of (A, W) at both ends of every non-empty span: (n+1, 2, p+1, 4).
+
+    Row i belongs to the span knots[i] <= u < knots[i+1] (the index `find_span` returns); rows
+    of empty spans and rows below `degree` stay zero and are never read.
+    """
+    p = degree
+    n_ctrl = cw.shape[0]
+    coef = np.zeros((n_ctrl, 2, p + 1, 4))
+    ndu = np.empty((p + 1, p + 1))
+    a = np.empty((2, p + 1))
+    left = np.empty(p + 1)
+    right = np.empty(p + 1)
+    ders = np.zeros((p + 1, p + 1))
+    for span in range(p, n_ctrl):
+        if knots[span + 1] <= knots[span]:
+            continue
+        for side in range(2):
+            _basis_ders(knots, p, span, knots[span + side], p, ndu, a, left, right, ders)
+            factorial = 1.0
+            for k in range(p + 1):
+                if k > 0:
+                    factorial *= k
+                for j in range(p + 1):
+                    row = span - p + j
+                    b = ders[k, j] / factorial
+                    for c in range(4):
+                        coef[span, side, k, c] += b * cw[row, c]
+    return coef
+
+
+@jit
+def _expansion(knots, span, u):
+    """Which end of the span to expand at (0 start, 1 end), and t = u - that knot."""
+    if u - knots[span] <= knots[span + 1] - u:
+        return 0, u - knots[span]
+    return 1, u - knots[span + 1]
+
+
+@jit
+def point_d1(knots, coef, degree, span, u):
+    """C(u) and C'(u) on `span` from its polynomial: (cx, cy, cz, dx, dy, dz).
+
+    `point_d2` without the second derivative, for the stepping loop: numba does not inline one
+    compiled function into another, and taking C'' along costs the loop 13 %.
+    """
+    side, t = _expansion(knots, span, u)
+    ax = coef[span, side, degree, 0]
+    ay = coef[span, side, degree, 1]
+    az = coef[span, side, degree, 2]
+    aw = coef[span, side, degree, 3]
+    dx = 0.0
+    dy = 0.0
+    dz = 0.0
+    dw = 0.0
+    for k in range(degree - 1, -1, -1):
+        dx = dx * t + ax
+        dy = dy * t + ay
+        dz = dz * t + az
+        dw = dw * t + aw
+        ax = ax * t + coef[span, side, k, 0]
+        ay = ay * t + coef[span, side, k, 1]
+        az = az * t + coef[span, side, k, 2]
+        aw = aw * t + coef[span, side, k, 3]
+    # C by division (a rounding error A and W share cancels: C(u_min) is P_0 exactly); C' with
+    # the reciprocal, computed alongside, so that C' waits for one division, not two in a row
+    inv_w = 1.0 / aw
+    cx = ax / aw
+    cy = ay / aw
+    cz = az / aw
+    return cx, cy, cz, (dx - dw * cx) * inv_w, (dy - dw * cy) * inv_w, (dz - dw * cz) * inv_w
+
+
+@jit
+def point_d2(knots, coef, degree, span, u):
+    """C(u), C'(u) and C''(u) on `span` from its polynomial: nine floats, C first."""
+    side, t = _expansion(knots, span, u)
+    ax = coef[span, side, degree, 0]
+    ay = coef[span, side, degree, 1]
+    az = coef[span, side, degree, 2]
+    aw = coef[span, side, degree, 3]
+    dx = 0.0
+    dy = 0.0
+    dz = 0.0
+    dw = 0.0
+    ex = 0.0
+    ey = 0.0
+    ez = 0.0
+    ew = 0.0
+    for k in range(degree - 1, -1, -1):
+        ex = ex * t + dx
+        ey = ey * t + dy
+        ez = ez * t + dz
+        ew = ew * t + dw
+        dx = dx * t + ax
+        dy = dy * t + ay
+        dz = dz * t + az
+        dw = dw * t + aw
+        ax = ax * t + coef[span, side, k, 0]
+        ay = ay * t + coef[span, side, k, 1]
+        az = az * t + coef[span, side, k, 2]
+        aw = aw * t + coef[span, side, k, 3]
+    # Horner leaves A' in d and A''/2 in e
+    inv_w = 1.0 / aw  # as in point_d1
+    cx = ax / aw
+    cy = ay / aw
+    cz = az / aw
+    c1x = (dx - dw * cx) * inv_w
+    c1y = (dy - dw * cy) * inv_w
+    c1z = (dz - dw * cz) * inv_w
+    c2x = (2.0 * ex - 2.0 * dw * c1x - 2.0 * ew * cx) * inv_w
+    c2y = (2.0 * ey - 2.0 * dw * c1y - 2.0 * ew * cy) * inv_w
+    c2z = (2.0 * ez - 2.0 * dw * c1z - 2.0 * ew * cz) * inv_w
+    return cx, cy, cz, c1x, c1y, c1z, c2x, c2y, c2z
+
+
+@jit
+def curvature(x1, y1, z1, x2, y2, z2):
+    """kappa = |C' x C''| / |C'|^3 (NaN where C' = 0) and |C'|, from C' and C''.
+
+    Scalars only: loops call find_span and point_d2 themselves and pass the derivatives here,
+    since a compiled helper that takes the curve's arrays costs a call per evaluation.
+    """
+    cross = math.sqrt((y1 * z2 - z1 * y2) ** 2 + (z1 * x2 - x1 * z2) ** 2
+                      + (x1 * y2 - y1 * x2) ** 2)
+    speed = math.sqrt(x1 * x1 + y1 * y1 + z1 * z1)
+    kappa = cross / speed**3 if speed > 0.0 else math.nan
+    return kappa, speed
+
+
+@jit
+def curvature_many(c1, c2, out):
+    """`curvature` of every row: c1, c2 (M, 3) -> out (M,)."""
+    for q in range(out.size):
+        out[q], _ = curvature(c1[q, 0], c1[q, 1], c1[q, 2], c2[q, 0], c2[q, 1], c2[q, 2])
+
+
+@jit
+def eval_many(knots, coef, degree, u, order, out):
     """C and its derivatives up to `order` (0, 1 or 2) at every u: out (order+1, M, 3).
 
     Parameters in increasing order are fastest (the span of the previous one is tried first);
     outside [u_min, u_max] the end spans extrapolate. Derivatives of order > degree are 0.
     """
-    p = degree
-    n_ctrl = cw.shape[0]
-    n = min(order, p)
-    ndu = np.empty((p + 1, p + 1))
-    a = np.empty((2, p + 1))
-    left = np.empty(p + 1)
-    right = np.empty(p + 1)
-    ders = np.zeros((3, p + 1))
-    h = np.empty((3, 4))
-    span = p
+    n_ctrl = coef.shape[0]
+    span = degree
     for q in range(u.size):
-        uq = u[q]
-        span = find_span(knots, p, n_ctrl, uq, span)
-        _basis_ders(knots, p, span, uq, n, ndu, a, left, right, ders)
-        for k in range(3):
-            for c in range(4):
-                h[k, c] = 0.0
-        for j in range(p + 1):
-            row = span - p + j
-            for k in range(n + 1):
-                b = ders[k, j]
-                for c in range(4):
-                    h[k, c] += b * cw[row, c]
-        w0 = h[0, 3]
-        for c in range(3):
-            c0 = h[0, c] / w0
-            out[0, q, c] = c0
-            if order >= 1:
-                c1 = (h[1, c] - h[1, 3] * c0) / w0
-                out[1, q, c] = c1
-                if order >= 2:
-                    out[2, q, c] = (h[2, c] - 2.0 * h[1, 3] * c1 - h[2, 3] * c0) / w0
+        span = find_span(knots, degree, n_ctrl, u[q], span)
+        cx, cy, cz, c1x, c1y, c1z, c2x, c2y, c2z = point_d2(knots, coef, degree, span, u[q])
+        out[0, q, 0] = cx
+        out[0, q, 1] = cy
+        out[0, q, 2] = cz
+        if order >= 1:
+            out[1, q, 0] = c1x
+            out[1, q, 1] = c1y
+            out[1, q, 2] = c1z
+            if order >= 2:
+                out[2, q, 0] = c2x
+                out[2, q, 1] = c2y
+                out[2, q, 2] = c2z

@@ -3,9 +3,10 @@
 C(u) = sum N_i,p(u) w_i P_i / sum N_i,p(u) w_i  (paper Eq. 1). Evaluation works on the homogeneous
 curve A(u) = sum N_i,p w_i P_i, W(u) = sum N_i,p w_i (basis derivatives by Piegl & Tiller A2.3),
 then the quotient rule (A4.2):  C = A/W,  C' = (A' - W'C)/W,  C'' = (A'' - 2W'C' - W''C)/W.
-Both evaluators live in `geometry.kernel` (compiled with numba): `eval_many` for the planning
-grid, `eval_d1` for the stepping loop; both are checked against a textbook evaluator that lives
-in the tests.
+The evaluators live in `geometry.kernel` (compiled with numba): each span's polynomial is built
+once per curve (`span_polynomials`, cached here) and evaluated by Horner's rule, vectorised
+(`eval_many`) or per parameter in the planning grid and the stepping loop; they are checked against
+a textbook evaluator that lives in the tests.
 """
 
 from __future__ import annotations
@@ -14,8 +15,9 @@ from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
+
 from nurbsfeed.errors import CurveError
-from nurbsfeed.geometry.kernel import eval_many
+from nurbsfeed.geometry.kernel import curvature_many, eval_many, span_polynomials
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -102,6 +104,12 @@ class NurbsCurve:
         return _readonly(np.column_stack([self.points * self.weights[:, None], self.weights]))
 
     @cached_property
+    def span_polynomials(self) -> np.ndarray:
+        """(n+1, 2, degree+1, 4): Taylor coefficients of (A, W) at both ends of each span
+        (geometry.kernel.span_polynomials), the form every evaluation uses."""
+        return _readonly(span_polynomials(self.knots, self.homogeneous, self.degree))
+
+    @cached_property
     def span_breaks(self) -> np.ndarray:
         """(m,) the distinct knot values from u_min to u_max, in order."""
         return _readonly(np.unique(self.knots[self.degree:len(self.knots) - self.degree]))
@@ -116,7 +124,7 @@ class NurbsCurve:
         """(order+1, *shape(u), 3) via the compiled evaluator of geometry.kernel."""
         flat = np.ascontiguousarray(np.ravel(u), dtype=float)
         out = np.empty((order + 1, flat.size, 3))
-        eval_many(self.knots, self.homogeneous, self.degree, flat, order, out)
+        eval_many(self.knots, self.span_polynomials, self.degree, flat, order, out)
         return out.reshape((order + 1,) + np.shape(u) + (3,))
 
     def point(self, u: np.ndarray | float) -> np.ndarray:
@@ -135,14 +143,12 @@ class NurbsCurve:
 
 
 def curvature_from_derivatives(c1: np.ndarray, c2: np.ndarray) -> np.ndarray:
-    """kappa = |C' x C''| / |C'|^3: (N, 3), (N, 3) -> (N,); NaN where C' = 0."""
-    x1, y1, z1 = c1[..., 0], c1[..., 1], c1[..., 2]
-    x2, y2, z2 = c2[..., 0], c2[..., 1], c2[..., 2]
-    cross = np.sqrt((y1 * z2 - z1 * y2) ** 2 + (z1 * x2 - x1 * z2) ** 2
-                    + (x1 * y2 - y1 * x2) ** 2)
-    speed = np.sqrt(x1 * x1 + y1 * y1 + z1 * z1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(speed > 0.0, cross / speed**3, np.nan)
+    """kappa = |C' x C''| / |C'|^3: (..., 3), (..., 3) -> (...); NaN where C' = 0."""
+    shape = np.shape(c1)[:-1]
+    out = np.empty(shape)
+    curvature_many(np.ascontiguousarray(c1, dtype=float).reshape(-1, 3),
+                   np.ascontiguousarray(c2, dtype=float).reshape(-1, 3), out.reshape(-1))
+    return out
 
 
 def check_knots(k: np.ndarray, degree: int, n_ctrl: int) -> None:
@@ -163,12 +169,12 @@ def check_knots(k: np.ndarray, degree: int, n_ctrl: int) -> None:
                          f"knots must be equal (order {order})")
     if k[-1] <= k[0]:
         raise CurveError(f"knot range is empty: all knots are {k[0]:g}")
-    interior = k[order:-order]
+    interior = k[order:-order]  # non-decreasing: equal knots are neighbours
     if interior.size:
-        values, counts = np.unique(interior, return_counts=True)
-        if np.any(counts > degree):
+        if interior.size > degree and np.any(interior[degree:] == interior[:-degree]):
+            values, counts = np.unique(interior, return_counts=True)
             bad = values[np.argmax(counts > degree)]
             raise CurveError(f"interior knot {bad:g} is repeated {int(counts.max())} times; at "
                              f"most {degree} (the degree) keeps the curve connected")
-        if np.any(values == k[0]) or np.any(values == k[-1]):
+        if interior[0] == k[0] or interior[-1] == k[-1]:
             raise CurveError(f"an end knot is repeated more than the order {order}")

@@ -27,22 +27,24 @@ between nodes.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from nurbsfeed.geometry.nurbs import NurbsCurve
+from nurbsfeed.jit import jit
 from nurbsfeed.planning.grid import Grid, build_grid
 from nurbsfeed.planning.limits import Limits, curvature_threshold, speed_limit
 from nurbsfeed.planning.scurve import scan_speeds, segment_profiles
-from nurbsfeed.planning.timelaw import TimeLaw
+from nurbsfeed.planning.timelaw import TimeLaw, chain_segments, speed_at_arc
 
 MAX_FIX_ROUNDS = 40
 SPEED_CHECK_REL_TOL = 1e-9  # a node "violates" when v > limit * (1 + this)
 GRID_STEPS = 2.0  # grid nodes at most this many full-speed steps apart
 MAX_GRID_NODES = 200_000  # per curve: spacing grows for very long curves at tiny periods
-PERIOD_ROUNDING_REL = 1e-9
-HOLD_ROOM = 0.05  # holds leave at least this fraction of a segment for its transitions  # a duration within this of a whole period count is not stretched
+PERIOD_ROUNDING_REL = 1e-9  # a duration within this of a whole period count is not stretched
+HOLD_ROOM = 0.05  # holds leave at least this fraction of a segment for its transitions
 
 KIND_END, KIND_PEAK, KIND_CORNER, KIND_FEED, KIND_HOLD = range(5)
 KIND_NAMES = {KIND_END: "end", KIND_PEAK: "peak", KIND_CORNER: "corner", KIND_FEED: "feed",
@@ -113,130 +115,239 @@ def feed_at(u: np.ndarray, feed_u: np.ndarray, feed_mm_s: np.ndarray) -> np.ndar
     return np.where(i >= 0, feed_mm_s[np.clip(i, 0, None)], np.inf)
 
 
-def _eroded(v: np.ndarray, stops: np.ndarray) -> np.ndarray:
-    """min(v[i-1], v[i], v[i+1]) per node, except that a stop node (corner or cusp, limit 0)
-    does not spread to its neighbours: beside a corner the curvature is finite."""
-    w = v.copy()
-    for n in stops:  # borrow the neighbours' limits for the stop node while eroding
-        w[n] = min(v[max(n - 1, 0)], v[min(n + 1, v.size - 1)])
-    out = w.copy()
-    out[1:] = np.minimum(out[1:], w[:-1])
-    out[:-1] = np.minimum(out[:-1], w[1:])
-    out[stops] = 0.0
-    return out
+@jit
+def _polygon_length(points):
+    """Length of the control polygon (N, 3): the curve is no longer."""
+    total = 0.0
+    for i in range(points.shape[0] - 1):
+        total += math.sqrt((points[i + 1, 0] - points[i, 0]) ** 2
+                           + (points[i + 1, 1] - points[i, 1]) ** 2
+                           + (points[i + 1, 2] - points[i, 2]) ** 2)
+    return total
 
 
-def _segments_of_nodes(key_node: np.ndarray, n_nodes: int) -> np.ndarray:
-    """For each grid node, the segment it lies in (key nodes belong to the segment they start)."""
-    seg = np.searchsorted(key_node, np.arange(n_nodes), side="right") - 1
-    return np.clip(seg, 0, len(key_node) - 2)
+@jit
+def _key_points(kappa, raw_limit, fcap, corner_index, peak_index, feed_nodes, kappa0, feed_cap):
+    """Steps 2 and 5's limit: the eroded limit (M,), key nodes, kinds and nominal speeds (K,),
+    segment caps (K-1,) and the number of peaks with kappa >= kappa0.
+
+    Corners and cusps (kappa infinite inside the curve) are stops, passed at rest. The eroded
+    limit is min(raw[i-1], raw[i], raw[i+1]) per node, except that a stop (limit 0) does not
+    spread to its neighbours (beside a corner the curvature is finite): it borrows their limits
+    while eroding. Key kinds: the ends, then feed changes, peaks with kappa >= kappa0 and stops
+    (a later kind wins at a node); nominal speed 0 at the ends and stops, the limit at the
+    others, and at a feed change the lower of the two feeds. A segment's cap is the lowest feed
+    over its nodes, from its first key node to the next one (the last node included).
+    """
+    size = kappa.size
+    last = size - 1
+    kind = np.full(size, -1, dtype=np.int64)
+    kind[0] = KIND_END
+    kind[last] = KIND_END
+    for n in feed_nodes:
+        if 0 < n < last:
+            kind[n] = KIND_FEED
+    n_peaks = 0
+    for n in peak_index:
+        if kappa[n] >= kappa0:
+            n_peaks += 1
+            if 0 < n < last:
+                kind[n] = KIND_PEAK
+    for n in corner_index:
+        if 0 < n < last:
+            kind[n] = KIND_CORNER
+    for n in range(1, last):
+        if math.isinf(kappa[n]):
+            kind[n] = KIND_CORNER
+    borrowed = raw_limit.copy()
+    for n in range(1, last):
+        if kind[n] == KIND_CORNER:
+            borrowed[n] = min(raw_limit[n - 1], raw_limit[n + 1])
+    limit = borrowed.copy()
+    for n in range(size):
+        if n > 0:
+            limit[n] = min(limit[n], borrowed[n - 1])
+        if n < last:
+            limit[n] = min(limit[n], borrowed[n + 1])
+        if kind[n] == KIND_CORNER:
+            limit[n] = 0.0
+    key_node = np.flatnonzero(kind >= 0)
+    key_kind = kind[key_node]
+    nominal = limit[key_node]
+    for k in range(key_node.size):
+        if key_kind[k] == KIND_END or key_kind[k] == KIND_CORNER:
+            nominal[k] = 0.0
+    for n in feed_nodes:
+        k = np.searchsorted(key_node, n)
+        nominal[k] = min(nominal[k], fcap[max(n - 1, 0)], fcap[n])
+    cap = np.full(key_node.size - 1, feed_cap)
+    seg = 0
+    for n in range(size):
+        if seg + 1 < cap.size and n >= key_node[seg + 1]:
+            seg += 1
+        cap[seg] = min(cap[seg], fcap[n])
+    return limit, key_node, key_kind, nominal, cap, n_peaks
+
+
+@jit
+def _whole_periods(v_key, key_t, key_node, limit, v_nodes, period_s):
+    """Step 6: the residual scale (whatever the key points could not fix: the largest v / limit
+    over the nodes that are not keys, at least 1), the keys where the motion rests (P+1,), and
+    per stretch between them (P,) its whole number of periods and its lambda."""
+    residual = 1.0
+    is_key = np.zeros(limit.size, dtype=np.bool_)
+    is_key[key_node] = True
+    for n in range(limit.size):
+        if limit[n] > 0.0 and not is_key[n]:
+            residual = max(residual, v_nodes[n] / limit[n])
+    rests = [0]
+    for k in range(1, v_key.size - 1):
+        if v_key[k] == 0.0:
+            rests.append(k)
+    rests.append(v_key.size - 1)
+    piece_key = np.array(rests)
+    piece_periods = np.zeros(piece_key.size - 1, dtype=np.int64)
+    piece_scale = np.ones(piece_key.size - 1)
+    for p in range(piece_key.size - 1):
+        duration = key_t[piece_key[p + 1]] - key_t[piece_key[p]]
+        if duration > 0.0:
+            exact = duration * residual / period_s
+            piece_periods[p] = max(1, math.ceil(exact * (1.0 - PERIOD_ROUNDING_REL)))
+            piece_scale[p] = piece_periods[p] * period_s / duration
+    return residual, piece_key, piece_periods, piece_scale
+
+
+@jit
+def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc, jerk):
+    """Steps 3-5: scan, segments, time law, then fix rounds until the law keeps the eroded
+    limit at every node (or MAX_FIX_ROUNDS, or a round that changes nothing).
+
+    cap, hold_start, hold_end (K-1,) are updated in place. A node between key points k and k+1
+    (key nodes excluded: they are passed at a key speed <= nominal by construction) that is too
+    fast lies before the end of the acceleration ("up"), after the start of the deceleration
+    ("down") or in the cruise. Up: hold the start speed until the first such node; down: hold
+    the end speed from the last one; cruise, or an end at rest, or holds that would leave less
+    than HOLD_ROOM of the segment: cap the segment at the lowest limit of its fast nodes.
+    Returns key speeds (K,), peak speeds (K-1,), the law's pieces (timelaw.chain_segments), the
+    law's speed at every node where it could exceed the limit (M,; 0 at the others and at key
+    nodes) and the number of fix rounds.
+    """
+    key_s = s_mm[key_node]
+    length = key_s[1:] - key_s[:-1]
+    n_seg = length.size
+    # a segment's profile (hence v at its nodes) depends on its end speeds, peak and holds only:
+    # what they were when its nodes were last checked (NaN: never)
+    seen = np.full((n_seg, 5), np.nan)
+    v_nodes = np.zeros(s_mm.size)
+    checked = np.empty(s_mm.size, dtype=np.int64)
+    rounds = 0
+    while True:
+        free = np.maximum(length - hold_start - hold_end, 0.0)
+        v = scan_speeds(nominal, free, cap, acc, jerk)
+        peak, d_up, d_down = segment_profiles(v, free, cap, acc, jerk)
+        t0, s0, v0, a0, jk, key_t, duration = chain_segments(key_s, v, peak, hold_start,
+                                                             hold_end, acc, jerk)
+        # Nodes are checked again only in segments whose profile changed; speed_at_arc solves
+        # only where the speed bound of the law's piece exceeds the node's limit (in low
+        # curvature, at most nodes it does not). The others get v_nodes = 0.
+        n_checked = 0
+        for seg in range(n_seg):
+            profile = (v[seg], v[seg + 1], peak[seg], hold_start[seg], hold_end[seg])
+            if (seen[seg, 0] == profile[0] and seen[seg, 1] == profile[1]
+                    and seen[seg, 2] == profile[2] and seen[seg, 3] == profile[3]
+                    and seen[seg, 4] == profile[4]):
+                continue
+            for k in range(5):
+                seen[seg, k] = profile[k]
+            for node in range(key_node[seg] + 1, key_node[seg + 1]):
+                checked[n_checked] = node
+                n_checked += 1
+        if t0.size and n_checked:
+            nodes = checked[:n_checked]
+            checked_v = np.empty(n_checked)
+            speed_at_arc(t0, s0, v0, a0, jk, duration, s_mm[nodes], limit[nodes], checked_v)
+            v_nodes[nodes] = checked_v
+        if rounds == MAX_FIX_ROUNDS:
+            break
+        changed = False
+        any_bad = False
+        for seg in range(n_seg):
+            accel_end = key_s[seg] + hold_start[seg] + d_up[seg]
+            decel_start = key_s[seg + 1] - hold_end[seg] - d_down[seg]
+            first_up = np.inf
+            last_down = -np.inf
+            lowest = np.inf
+            up = False
+            down = False
+            mid = False
+            for node in range(key_node[seg] + 1, key_node[seg + 1]):
+                if v_nodes[node] <= limit[node] * (1.0 + SPEED_CHECK_REL_TOL):
+                    continue
+                s = s_mm[node]
+                lowest = min(lowest, limit[node])
+                if s < accel_end:
+                    up = True
+                    first_up = min(first_up, s)
+                elif s > decel_start:
+                    down = True
+                    last_down = max(last_down, s)
+                else:
+                    mid = True
+            if not (up or down or mid):
+                continue
+            any_bad = True
+            new_start = hold_start[seg]
+            new_end = hold_end[seg]
+            if up and v[seg] > 0.0:
+                new_start = max(new_start, first_up - key_s[seg])
+            if down and v[seg + 1] > 0.0:
+                new_end = max(new_end, key_s[seg + 1] - last_down)
+            lower_cap = mid or (up and v[seg] == 0.0) or (down and v[seg + 1] == 0.0)
+            # A hold shortens what is left for the transitions; the next scan lowers the key
+            # speeds until they fit. Holds that would meet leave no room: lower the cap instead.
+            if new_start + new_end < length[seg] * (1.0 - HOLD_ROOM):
+                if new_start != hold_start[seg] or new_end != hold_end[seg]:
+                    changed = True
+                hold_start[seg] = new_start
+                hold_end[seg] = new_end
+            else:
+                lower_cap = True
+            if lower_cap and 0.0 < lowest < cap[seg]:
+                cap[seg] = lowest
+                changed = True
+        if not any_bad:
+            break
+        rounds += 1
+        if not changed:
+            break
+    return v, peak, t0, s0, v0, a0, jk, key_t, duration, v_nodes, rounds
 
 
 def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
                feed_mm_s: np.ndarray = np.empty(0)) -> Plan:
     """Plan the feed along one curve under `lim` (feed cap already in lim.feed_mm_s)."""
-    rough_length = float(np.sum(np.linalg.norm(np.diff(curve.points, axis=0), axis=1)))
+    rough_length = _polygon_length(curve.points)
     spacing = max(GRID_STEPS * lim.feed_mm_s * lim.period_s, rough_length / MAX_GRID_NODES)
     feed_breaks = feed_u[1:] if feed_u.size else feed_u
     kappa0 = curvature_threshold(lim)
     grid = build_grid(curve, spacing, feed_breaks, kappa0)
     fcap = feed_at(grid.u, feed_u, feed_mm_s)
-    # corners (tangent jumps) and cusps (kappa infinite inside the curve) are passed at rest
-    last = grid.u.size - 1
-    stops = np.union1d(grid.corner_index, np.flatnonzero(np.isinf(grid.kappa_1_mm)))
-    stops = stops[(stops > 0) & (stops < last)]
-    limit = _eroded(speed_limit(grid.kappa_1_mm, lim, fcap), stops)
-
-    # ---- key points -----------------------------------------------------------------------
-    peaks = grid.peak_index[grid.kappa_1_mm[grid.peak_index] >= kappa0]
     feed_nodes = np.searchsorted(grid.u, feed_breaks)
-    nodes = {0: KIND_END, last: KIND_END}
-    for kind, idx in ((KIND_FEED, feed_nodes), (KIND_PEAK, peaks), (KIND_CORNER, stops)):
-        for n in idx:
-            if 0 < n < last:
-                nodes[int(n)] = kind
-    key_node = np.array(sorted(nodes))
-    key_kind = np.array([nodes[n] for n in key_node])
-    nominal = limit[key_node].copy()
-    nominal[(key_kind == KIND_END) | (key_kind == KIND_CORNER)] = 0.0
-    for n in feed_nodes:  # the lower of the two feeds holds at the change
-        k = np.searchsorted(key_node, n)
-        nominal[k] = min(nominal[k], fcap[max(n - 1, 0)], fcap[n])
-
+    limit, key_node, key_kind, nominal, cap, n_peaks = _key_points(
+        grid.kappa_1_mm, speed_limit(grid.kappa_1_mm, lim, fcap), fcap, grid.corner_index,
+        grid.peak_index, feed_nodes, kappa0, lim.feed_mm_s)
     hold_start = np.zeros(len(key_node) - 1)
     hold_end = np.zeros(len(key_node) - 1)
-    seg_of_node = _segments_of_nodes(key_node, grid.u.size)
-    cap = np.full(len(key_node) - 1, lim.feed_mm_s)
-    np.minimum.at(cap, seg_of_node, fcap)
-    a, j = lim.acc_mm_s2, lim.jerk_mm_s3
+    v, peak, *pieces, key_t, duration, v_nodes, rounds = _limit_rounds(
+        grid.s_mm, limit, key_node, nominal, cap, hold_start, hold_end, lim.acc_mm_s2,
+        lim.jerk_mm_s3)
+    law = TimeLaw.from_pieces(*pieces, key_t, duration, grid.length_mm)
 
-    rounds = 0
-    while True:
-        key_s = grid.s_mm[key_node]
-        length = np.diff(key_s)
-        free = np.maximum(length - hold_start - hold_end, 0.0)
-        v = scan_speeds(nominal, free, cap, a, j)
-        peak, d_up, d_down = segment_profiles(v, free, cap, a, j)
-        law = TimeLaw.from_segments(key_s, v, peak, hold_start, hold_end, a, j)
-        v_nodes = law.speed_at_arc(grid.s_mm)
-        bad = v_nodes > limit * (1.0 + SPEED_CHECK_REL_TOL)
-        bad[key_node] = False  # passed at the key speed <= nominal by construction
-        if not np.any(bad) or rounds == MAX_FIX_ROUNDS:
-            break
-        rounds += 1
-        accel_end = key_s[:-1] + hold_start + d_up
-        decel_start = key_s[1:] - hold_end - d_down
-        changed = False
-        for seg in np.unique(seg_of_node[bad]):
-            nodes_bad = np.flatnonzero(bad & (seg_of_node == seg))
-            s_bad = grid.s_mm[nodes_bad]
-            up = s_bad < accel_end[seg]
-            down = s_bad > decel_start[seg]
-            mid = ~(up | down)
-            new_start, new_end = hold_start[seg], hold_end[seg]
-            if np.any(up) and v[seg] > 0.0:
-                new_start = max(new_start, s_bad[up].min() - key_s[seg])
-            if np.any(down) and v[seg + 1] > 0.0:
-                new_end = max(new_end, key_s[seg + 1] - s_bad[down].max())
-            if np.any(mid) or (np.any(up) and v[seg] == 0.0) or (np.any(down)
-                                                                  and v[seg + 1] == 0.0):
-                lowest = float(limit[nodes_bad].min())
-                if 0.0 < lowest < cap[seg]:
-                    cap[seg] = lowest
-                    changed = True
-            # A hold shortens what is left for the transitions; the next scan lowers the key
-            # speeds until they fit. Holds that would meet leave no room: lower the cap instead.
-            if new_start + new_end < length[seg] * (1.0 - HOLD_ROOM):
-                changed |= (new_start, new_end) != (hold_start[seg], hold_end[seg])
-                hold_start[seg], hold_end[seg] = new_start, new_end
-            else:
-                lowest = float(limit[nodes_bad].min())
-                if 0.0 < lowest < cap[seg]:
-                    cap[seg] = lowest
-                    changed = True
-        if not changed:
-            break
-
-    # Whatever the key points could not fix is fixed by slowing the whole law uniformly.
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(limit > 0, v_nodes / limit, 0.0)
-    ratio[key_node] = 0.0
-    residual = max(1.0, float(np.max(ratio)))
-    # The motion stops at every interior key of speed 0 (corners, cusps): each stretch between
-    # stops is stretched to a whole number of periods on its own and stepped on its own, so that
-    # an interpolation point lands exactly on every corner.
-    piece_key = np.array([0] + [k for k in range(1, len(v) - 1) if v[k] == 0.0] + [len(v) - 1])
-    piece_duration = np.diff(law.key_t_s[piece_key])
-    exact = piece_duration * residual / lim.period_s
-    piece_periods = np.where(piece_duration > 0.0,
-                             np.maximum(1, np.ceil(exact * (1.0 - PERIOD_ROUNDING_REL))),
-                             0).astype(np.int64)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        piece_scale = np.where(piece_duration > 0.0,
-                               piece_periods * lim.period_s / piece_duration, 1.0)
+    residual, piece_key, piece_periods, piece_scale = _whole_periods(
+        v, law.key_t_s, key_node, limit, v_nodes, lim.period_s)
     for arr in (key_node, key_kind, nominal, v, peak, hold_start, hold_end, piece_key,
                 piece_periods, piece_scale):
         arr.setflags(write=False)
-    return Plan(curve, lim, grid, kappa0, int(peaks.size), key_node, key_kind, nominal, v, peak,
+    return Plan(curve, lim, grid, kappa0, int(n_peaks), key_node, key_kind, nominal, v, peak,
                 hold_start, hold_end, law, residual, piece_key, piece_periods, piece_scale,
                 rounds)

@@ -7,6 +7,7 @@ so any time is evaluated from the integer period index directly (t_k = k T), nev
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -14,12 +15,13 @@ import numpy as np
 from nurbsfeed.jit import jit
 from nurbsfeed.planning.scurve import transition_phases
 
-ARC_ITERATIONS = 80  # Newton converges in ~5; bisection fallback needs <= 60
+ARC_ITERATIONS = 80  # Newton converges in ~3 from a warm start; bisection fallback needs <= 60
+ARC_TAU_REL_TOL = 1e-12  # tau, hence v, to 1e-12: the planner checks v to 1e-9
 PHASES_PER_SEGMENT = 9  # hold, 3 up, cruise, 3 down, hold
 
 
 @jit
-def _build(s_key, v_key, v_peak, hold_start, hold_end, acc, jerk):
+def chain_segments(s_key, v_key, v_peak, hold_start, hold_end, acc, jerk):
     """Chain the segments into constant-jerk pieces; see TimeLaw.from_segments."""
     n_seg = s_key.size - 1
     cap = n_seg * PHASES_PER_SEGMENT
@@ -98,41 +100,117 @@ def _build(s_key, v_key, v_peak, hold_start, hold_end, acc, jerk):
 
 
 @jit
-def _speed_at_arc(t0, s0, v0, a0, jk, duration, s_query, out):
-    """v where the law passes each arc length: binary search of the piece, then Newton on
-    s(tau) = s (f' = v >= 0) kept inside a shrinking bracket, bisecting when a step leaves it."""
+def speed_at_arc(t0, s0, v0, a0, jk, duration, s_query, floor, out):
+    """v where the law passes each arc length s_query (M,) -> out (M,), wherever it could
+    exceed floor (M,); 0 where it cannot (pass floor = -inf for every speed).
+
+    The piece is found by a pointer that moves forward for increasing queries (the grid's
+    nodes), by binary search otherwise. v over a piece is bounded by its values at both ends
+    and at a turning point inside (the S-curve's pieces have none: the acceleration keeps its
+    sign within each); at or below floor, the piece is not solved. Otherwise, within a piece
+    (state v0, a0, jerk j at its start):
+    - j = 0, a0 = 0 (cruise, hold): v = v0;
+    - j = 0: v^2 = v0^2 + 2 a0 (s - s0), exactly;
+    - otherwise s(tau) = v0 tau + a0 tau^2/2 + j tau^3/6 is solved for tau by Newton's method
+      (f' = v >= 0) kept inside a shrinking bracket, bisecting when a step leaves it; the start
+      is the previous query's tau in the same piece, moved on by ds / v.
+    """
     n = t0.size
+    i = 0
+    tau = 0.0
     for q in range(s_query.size):
         s = s_query[q]
-        lo = 0
-        hi = n - 1
-        while lo < hi:  # last piece with s0 <= s
-            mid = (lo + hi + 1) // 2
-            if s0[mid] <= s:
-                lo = mid
+        previous = i
+        if s < s0[i]:
+            lo = 0
+            hi = n - 1
+            while lo < hi:  # last piece with s0 <= s
+                mid = (lo + hi + 1) // 2
+                if s0[mid] <= s:
+                    lo = mid
+                else:
+                    hi = mid - 1
+            i = lo
+        while i + 1 < n and s0[i + 1] <= s:
+            i += 1
+        vi = v0[i]
+        ai = a0[i]
+        ji = jk[i]
+        span = (t0[i + 1] if i + 1 < n else duration) - t0[i]
+        bound = max(vi, vi + span * (ai + span * ji / 2.0))
+        if ji != 0.0 and 0.0 < -ai / ji < span:
+            bound = max(bound, vi - ai * ai / (2.0 * ji))
+        if bound <= floor[q]:
+            out[q] = 0.0
+            continue
+        target = s - s0[i]
+        if ji == 0.0:
+            if ai == 0.0:
+                out[q] = vi
             else:
-                hi = mid - 1
-        i = lo
-        end = t0[i + 1] if i + 1 < n else duration
+                out[q] = math.sqrt(max(vi * vi + 2.0 * ai * target, 0.0))
+            continue
+        if target <= 0.0:  # at the piece's start (a triple root when it starts from rest)
+            out[q] = vi
+            continue
         low = 0.0
-        high = end - t0[i]
-        vi, ai, ji, target = v0[i], a0[i], jk[i], s - s0[i]
-        tau = 0.5 * high
+        high = span
+        if i == previous and 0.0 < tau < high:  # the previous tau, moved on by ds / v
+            v_prev = vi + tau * (ai + tau * ji / 2.0)
+            if v_prev > 0.0:
+                tau += (target - tau * (vi + tau * (ai / 2.0 + tau * ji / 6.0))) / v_prev
+        if not 0.0 < tau < high:
+            tau = 0.5 * high
         for _ in range(ARC_ITERATIONS):
             f = tau * (vi + tau * (ai / 2.0 + tau * ji / 6.0)) - target
+            if f == 0.0:
+                break
             if f < 0.0:
                 low = tau
             else:
                 high = tau
             slope = vi + tau * (ai + tau * ji / 2.0)
             step = tau - f / slope if slope > 0.0 else -1.0
-            if step <= low or step >= high:
+            if not low < step < high:
                 step = 0.5 * (low + high)
-            if abs(step - tau) <= 1e-15 * (tau + 1e-300) or high - low <= 1e-15 * high:
-                tau = step
-                break
+            converged = (abs(step - tau) <= ARC_TAU_REL_TOL * tau
+                         or high - low <= ARC_TAU_REL_TOL * high)
             tau = step
+            if converged:
+                break
         out[q] = vi + tau * (ai + tau * ji / 2.0)
+
+
+@jit
+def evaluate(t0, s0, v0, a0, jk, t, piece, local, v, a, j):
+    """The law at times t (M,): piece index (the last piece starting at or before t, the first
+    before the law starts), local arc s - s0[piece], v, a and j, each (M,).
+
+    Increasing times are fastest: the piece is found by a pointer that moves forward, by binary
+    search otherwise.
+    """
+    n = t0.size
+    i = 0
+    for q in range(t.size):
+        tq = t[q]
+        if tq < t0[i]:
+            lo = 0
+            hi = n - 1
+            while lo < hi:  # last piece with t0 <= t
+                mid = (lo + hi + 1) // 2
+                if t0[mid] <= tq:
+                    lo = mid
+                else:
+                    hi = mid - 1
+            i = lo
+        while i + 1 < n and t0[i + 1] <= tq:
+            i += 1
+        tau = tq - t0[i]
+        piece[q] = i
+        local[q] = tau * (v0[i] + tau * (a0[i] / 2.0 + tau * jk[i] / 6.0))
+        v[q] = v0[i] + tau * (a0[i] + tau * jk[i] / 2.0)
+        a[q] = a0[i] + jk[i] * tau
+        j[q] = jk[i]
 
 
 @dataclass(frozen=True, eq=False)
@@ -158,47 +236,56 @@ class TimeLaw:
         takes up whatever distance the transitions leave, and the state is reset at every key.
         """
         f = np.ascontiguousarray
-        *arrays, duration = _build(f(s_key_mm, dtype=float), f(v_key_mm_s, dtype=float),
-                                   f(v_peak_mm_s, dtype=float), f(hold_start_mm, dtype=float),
-                                   f(hold_end_mm, dtype=float), float(acc_mm_s2),
-                                   float(jerk_mm_s3))
+        *arrays, duration = chain_segments(
+            f(s_key_mm, dtype=float), f(v_key_mm_s, dtype=float), f(v_peak_mm_s, dtype=float),
+            f(hold_start_mm, dtype=float), f(hold_end_mm, dtype=float), float(acc_mm_s2),
+            float(jerk_mm_s3))
+        return cls.from_pieces(*arrays, duration, float(s_key_mm[-1]))
+
+    @classmethod
+    def from_pieces(cls, t0_s: np.ndarray, s0_mm: np.ndarray, v0_mm_s: np.ndarray,
+                    a0_mm_s2: np.ndarray, jerk_mm_s3: np.ndarray, key_t_s: np.ndarray,
+                    duration_s: float, length_mm: float) -> "TimeLaw":
+        """The law of the pieces `chain_segments` made (the planner's compiled loop)."""
+        arrays = (t0_s, s0_mm, v0_mm_s, a0_mm_s2, jerk_mm_s3, key_t_s)
         for arr in arrays:
             arr.setflags(write=False)
-        return cls(*arrays, duration_s=float(duration), length_mm=float(s_key_mm[-1]))
+        return cls(*arrays, duration_s=float(duration_s), length_mm=float(length_mm))
 
     @property
     def is_empty(self) -> bool:
         """A law of zero length (a curve whose control points are all equal)."""
         return self.t0_s.size == 0
 
-    def _piece(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        i = np.clip(np.searchsorted(self.t0_s, t_s, side="right") - 1, 0, len(self.t0_s) - 1)
-        return i, t_s - self.t0_s[i]
+    def sample(self, t_s: np.ndarray) -> tuple[np.ndarray, ...]:
+        """At times (N,) (increasing is fastest): piece index, arc length within the piece
+        (s - s0_mm[piece]), v, a, j: five (N,) arrays (see `evaluate`)."""
+        t_s = np.ascontiguousarray(t_s, dtype=float)
+        piece = np.empty(t_s.size, dtype=np.int64)
+        local, v, a, j = (np.empty(t_s.size) for _ in range(4))
+        evaluate(self.t0_s, self.s0_mm, self.v0_mm_s, self.a0_mm_s2, self.jerk_mm_s3, t_s, piece,
+                 local, v, a, j)
+        return piece, local, v, a, j
 
     def at(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """s, v, a, j at absolute times (N,) -> four (N,) arrays."""
         if self.is_empty:
             zero = np.zeros(np.shape(t_s))
             return zero, zero, zero, zero
-        i, tau = self._piece(np.asarray(t_s, dtype=float))
-        v0, a0, j = self.v0_mm_s[i], self.a0_mm_s2[i], self.jerk_mm_s3[i]
-        s = self.s0_mm[i] + tau * (v0 + tau * (a0 / 2.0 + tau * j / 6.0))
-        v = v0 + tau * (a0 + tau * j / 2.0)
-        return s, v, a0 + j * tau, j
+        piece, local, v, a, j = self.sample(t_s)
+        return self.s0_mm[piece] + local, v, a, j
 
     def increments(self, t_s: np.ndarray) -> np.ndarray:
         """s(t[k+1]) - s(t[k]) for sorted times (N+1,) -> (N,), computed piece-locally so that a
         tiny step far along the curve keeps its relative precision."""
-        i, tau = self._piece(np.asarray(t_s, dtype=float))
-        v0, a0, j = self.v0_mm_s[i], self.a0_mm_s2[i], self.jerk_mm_s3[i]
-        local = tau * (v0 + tau * (a0 / 2.0 + tau * j / 6.0))
-        return (self.s0_mm[i[1:]] - self.s0_mm[i[:-1]]) + (local[1:] - local[:-1])
+        piece, local, _, _, _ = self.sample(t_s)
+        return (self.s0_mm[piece[1:]] - self.s0_mm[piece[:-1]]) + (local[1:] - local[:-1])
 
     def speed_at_arc(self, s_mm: np.ndarray) -> np.ndarray:
         """v where the law passes arc length s: (M,) -> (M,)."""
         s_mm = np.ascontiguousarray(s_mm, dtype=float)
         out = np.zeros_like(s_mm)
         if not self.is_empty:
-            _speed_at_arc(self.t0_s, self.s0_mm, self.v0_mm_s, self.a0_mm_s2, self.jerk_mm_s3,
-                          self.duration_s, s_mm, out)
+            speed_at_arc(self.t0_s, self.s0_mm, self.v0_mm_s, self.a0_mm_s2, self.jerk_mm_s3,
+                         self.duration_s, s_mm, np.full(s_mm.size, -np.inf), out)
         return out

@@ -1,8 +1,13 @@
-"""Synthetic shop programs for the benchmarks: many smooth cubic NURBS curves, chained.
+"""Synthetic shop programs for the benchmarks: many butterfly-sized cubic NURBS curves, chained.
 
-Each curve is a clamped cubic through a random walk of control points (seeded), starting where
-the previous one ended, so the programs look like a CAM finishing pass: hundreds of curves of
-tens of mm, rational weights, a few G0 moves between groups.
+Each curve is a finishing-pass toolpath the way CAM fits it: 50 control points (the butterfly
+has 51) 4-9 mm apart along a path whose heading turns gently (0.2 rad per control point, normal)
+with a tight bend at one control point in three or four (another 1.2 rad, normal), a little
+Z, rational weights, and knots averaged from the chord lengths (de Boor), so that |C'| is even
+along the curve. Under the default machine at F6000 a curve is ~300 mm long, runs ~3,300
+periods and has ~15 curvature peaks above kappa_0 (the tightest bends of radius ~0.4 mm) where the
+feed drops and the limit-fixing rounds work. Each curve starts where the previous one ended
+(seeded, reproducible).
 """
 
 from __future__ import annotations
@@ -11,22 +16,38 @@ import json
 
 import numpy as np
 
+N_CTRL = 50
+STEP_MM = (4.0, 9.0)  # control point spacing, uniform
+TURN_RAD = 0.2  # heading change per control point, normal
+BEND_SHARE = 0.3  # share of control points with a tight bend ...
+BEND_RAD = 1.2  # ... of this much more heading change, normal
+Z_STEP_MM = 0.1
 
-def random_curves(n_curves: int, seed: int = 1, n_ctrl: int = 24) -> list[dict]:
+
+def random_curves(n_curves: int, seed: int = 1, n_ctrl: int = N_CTRL) -> list[dict]:
     rng = np.random.default_rng(seed)
     curves = []
     start = np.zeros(3)
+    heading = 0.0
     for i in range(n_curves):
-        steps = rng.normal(0.0, 6.0, (n_ctrl - 1, 3)) * [1.0, 1.0, 0.1]
-        pts = np.vstack([start, start + np.cumsum(steps, axis=0)])
-        inner = np.sort(rng.uniform(0.0, 1.0, n_ctrl - 4))
+        bends = rng.normal(0.0, TURN_RAD, n_ctrl - 1)
+        bends += (rng.random(n_ctrl - 1) < BEND_SHARE) * rng.normal(0.0, BEND_RAD, n_ctrl - 1)
+        headings = heading + np.cumsum(bends)
+        steps = rng.uniform(*STEP_MM, n_ctrl - 1)
+        moves = np.column_stack([steps * np.cos(headings), steps * np.sin(headings),
+                                 rng.normal(0.0, Z_STEP_MM, n_ctrl - 1)])
+        pts = np.vstack([start, start + np.cumsum(moves, axis=0)])
+        chord = np.concatenate([[0.0], np.cumsum(np.linalg.norm(moves, axis=1))])
+        t = chord / chord[-1]
+        inner = [t[j:j + 3].mean() for j in range(1, n_ctrl - 3)]  # de Boor averaging
         knots = np.concatenate([np.zeros(4), inner, np.ones(4)])
-        weights = rng.uniform(0.8, 1.25, n_ctrl)
+        weights = rng.uniform(0.9, 1.1, n_ctrl)
         weights[0] = weights[-1] = 1.0
         curves.append({"name": f"c{i}", "degree": 3, "knots": knots.round(6).tolist(),
                        "control_points": pts.round(4).tolist(),
                        "weights": weights.round(4).tolist()})
         start = pts[-1].round(4)
+        heading = float(headings[-1])
     return curves
 
 
