@@ -58,7 +58,8 @@ def violated(report) -> set[str]:
 # ---- compare --------------------------------------------------------------------------------
 
 def _independent_ff(curve, result) -> np.ndarray:
-    """FF per period from scipy's evaluator at the stepped parameters (not the kernel's points)."""
+    """FF per period from the vectorised evaluator at the stepped parameters (not the kernel's
+    points)."""
     chord = np.linalg.norm(np.diff(curve.point(result.u), axis=0), axis=1)
     keep = result.ds_mm > 0
     return np.abs(chord[keep] - result.ds_mm[keep]) / result.ds_mm[keep]
@@ -73,7 +74,7 @@ def test_compare_on_the_butterfly_matches_an_independent_computation_and_the_pap
     for method, row in rows.items():
         result = interpolate(plan, method)
         ff = _independent_ff(plan.curve, result)
-        # the kernel and scipy agree to ~1e-14 mm: relative 1e-9 of rk2c's 3e-7 fluctuation
+        # the two evaluators agree to ~1e-14 mm: relative 1e-9 of rk2c's 3e-7 fluctuation
         assert row.max_ff_pct == pytest.approx(100 * ff.max(), rel=1e-3, abs=1e-9)
         assert row.mean_ff_pct == pytest.approx(100 * ff.mean(), rel=1e-3, abs=1e-11)
         assert row.n_points == plan.n_periods + 1 == row.n_steps + 1

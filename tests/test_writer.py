@@ -9,7 +9,7 @@ import re
 import numpy as np
 import pytest
 
-from nurbsfeed.gcode.writer import MoveWriter, format_number, round_ticks
+from nurbsfeed.gcode.writer import MoveWriter, format_number, hold_before_end, round_ticks
 from tests.gcode_parse import moves
 
 
@@ -146,3 +146,24 @@ def test_moves_match_a_plain_reference_writer(seed, decimals, feed_decimals, per
         writer.write(points[lo:lo + 997])
     expected = reference_moves(points[1:], points[0], decimals, feed_decimals, period_s, eol)
     assert out.getvalue().decode("ascii") == expected
+
+
+def test_the_move_onto_the_end_spans_every_period_up_to_the_end() -> None:
+    """The last points of a curve round onto its end: they are held before it, so the final
+    move lasts all their periods and the moves cover the whole planned time."""
+    pts = slow_start_path(30000)
+    ticks = round_ticks(pts, 4)
+    same_as_end = np.all(ticks == ticks[-1], axis=1)
+    assert same_as_end[-5:].all()  # the path really ends at rest, below the resolution
+    held = hold_before_end(pts, 4)
+    text, _ = write(held)
+    written, feeds, _ = moves(text, ticks[0] / 1e4)
+    step = np.linalg.norm(np.diff(np.vstack([ticks[:1] / 1e4, written]), axis=0), axis=1)
+    periods = np.round(step / (feeds / 60.0) / 0.001)
+    assert periods.sum() == len(pts) - 1
+    assert np.array_equal(written[-1], ticks[-1] / 1e4)
+    # only the trailing run changes, and only to the point before it
+    first_same = int(np.flatnonzero(~same_as_end)[-1]) + 1
+    assert np.array_equal(held[:first_same], pts[:first_same])
+    assert np.all(held[first_same:-1] == pts[first_same - 1]) and np.array_equal(held[-1],
+                                                                               pts[-1])

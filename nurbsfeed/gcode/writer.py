@@ -176,6 +176,33 @@ def round_ticks(points: np.ndarray, decimals: int) -> np.ndarray:
     return out
 
 
+def hold_before_end(points: np.ndarray, decimals: int) -> np.ndarray:
+    """points (N, 3), ending at the curve end, with the trailing points that round onto the end
+    replaced by the point before them.
+
+    Those points are not written (they equal the end as written), and a dropped point's period
+    goes to the next move; at the end there is none, so the machine would arrive early. Held at
+    the point before them instead, they make the one move onto the end span all their periods:
+    it arrives when the plan does. Only the last few points are looked at.
+    """
+    end = round_ticks(points[-1:], decimals)[0]
+    look = 16
+    while True:
+        tail = round_ticks(points[-look:], decimals)
+        differ = np.flatnonzero(np.any(tail != end, axis=1))
+        if differ.size or look >= len(points):
+            break
+        look = min(4 * look, len(points))
+    if differ.size == 0:
+        return points
+    first_same = len(points) - look + int(differ[-1]) + 1  # first of the run equal to the end
+    if first_same >= len(points) - 1:
+        return points
+    held = points.copy()
+    held[first_same:-1] = points[first_same - 1]
+    return held
+
+
 class MoveWriter:
     """Writes the G1 moves of one curve to a binary stream, chunk by chunk."""
 
