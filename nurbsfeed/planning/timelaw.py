@@ -100,6 +100,26 @@ def chain_segments(s_key, v_key, v_peak, hold_start, hold_end, acc, jerk):
 
 
 @jit
+def _last_at_or_below(starts, x, i):
+    """The last index with starts[index] <= x (0 if none), for queries that mostly increase:
+    walk forward from the previous answer i, binary search when x went back."""
+    n = starts.size
+    if x < starts[i]:
+        lo = 0
+        hi = n - 1
+        while lo < hi:
+            mid = (lo + hi + 1) // 2
+            if starts[mid] <= x:
+                lo = mid
+            else:
+                hi = mid - 1
+        i = lo
+    while i + 1 < n and starts[i + 1] <= x:
+        i += 1
+    return i
+
+
+@jit
 def speed_at_arc(t0, s0, v0, a0, jk, duration, s_query, floor, out):
     """v where the law passes each arc length s_query (M,) -> out (M,), wherever it could
     exceed floor (M,); 0 where it cannot (pass floor = -inf for every speed).
@@ -121,18 +141,7 @@ def speed_at_arc(t0, s0, v0, a0, jk, duration, s_query, floor, out):
     for q in range(s_query.size):
         s = s_query[q]
         previous = i
-        if s < s0[i]:
-            lo = 0
-            hi = n - 1
-            while lo < hi:  # last piece with s0 <= s
-                mid = (lo + hi + 1) // 2
-                if s0[mid] <= s:
-                    lo = mid
-                else:
-                    hi = mid - 1
-            i = lo
-        while i + 1 < n and s0[i + 1] <= s:
-            i += 1
+        i = _last_at_or_below(s0, s, i)
         vi = v0[i]
         ai = a0[i]
         ji = jk[i]
@@ -189,22 +198,10 @@ def evaluate(t0, s0, v0, a0, jk, t, piece, local, v, a, j):
     Increasing times are fastest: the piece is found by a pointer that moves forward, by binary
     search otherwise.
     """
-    n = t0.size
     i = 0
     for q in range(t.size):
         tq = t[q]
-        if tq < t0[i]:
-            lo = 0
-            hi = n - 1
-            while lo < hi:  # last piece with t0 <= t
-                mid = (lo + hi + 1) // 2
-                if t0[mid] <= tq:
-                    lo = mid
-                else:
-                    hi = mid - 1
-            i = lo
-        while i + 1 < n and t0[i + 1] <= tq:
-            i += 1
+        i = _last_at_or_below(t0, tq, i)
         tau = tq - t0[i]
         piece[q] = i
         local[q] = tau * (v0[i] + tau * (a0[i] / 2.0 + tau * jk[i] / 6.0))
