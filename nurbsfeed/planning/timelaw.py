@@ -33,8 +33,6 @@ def chain_segments(s_key, v_key, v_peak, hold_start, hold_end, acc, jerk):
     key_t = np.zeros(s_key.size)
     durations = np.empty(PHASES_PER_SEGMENT)
     jerks = np.empty(PHASES_PER_SEGMENT)
-    work_d = np.empty(3)
-    work_j = np.empty(3)
     count = 0
     t = 0.0
     for i in range(n_seg):
@@ -50,24 +48,14 @@ def chain_segments(s_key, v_key, v_peak, hold_start, hold_end, acc, jerk):
             durations[n] = hold_start[i] / va
             jerks[n] = 0.0
             n += 1
-        m = transition_phases(va, vp, acc, jerk, work_d, work_j)
-        d_up = 0.0
-        for q in range(m):
-            durations[n] = work_d[q]
-            jerks[n] = work_j[q]
-            d_up += work_d[q]
-            n += 1
-        d_up *= 0.5 * (va + vp)
+        m = transition_phases(va, vp, acc, jerk, durations[n:], jerks[n:])
+        d_up = 0.5 * (va + vp) * durations[n:n + m].sum()
+        n += m
         n_cruise = n
         n += 1
-        m = transition_phases(vp, vb, acc, jerk, work_d, work_j)
-        d_down = 0.0
-        for q in range(m):
-            durations[n] = work_d[q]
-            jerks[n] = work_j[q]
-            d_down += work_d[q]
-            n += 1
-        d_down *= 0.5 * (vp + vb)
+        m = transition_phases(vp, vb, acc, jerk, durations[n:], jerks[n:])
+        d_down = 0.5 * (vp + vb) * durations[n:n + m].sum()
+        n += m
         if hold_end[i] > 0.0 and vb > 0.0:
             durations[n] = hold_end[i] / vb
             jerks[n] = 0.0
