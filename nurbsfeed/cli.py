@@ -28,12 +28,6 @@ TAYLOR1_WARNING = ("nurbsfeed: warning: taylor1 is the paper's first-order basel
 GCODE_SUFFIXES = (".nc", ".ngc", ".gcode", ".tap", ".cnc", ".txt", ".json", ".mpf", ".eia")
 
 
-def _fail(message: str, code: int = EXIT_BAD_INPUT) -> None:
-    click.echo(f"nurbsfeed: {message}" if ":" not in message.split(" ")[0] else message,
-               err=True)
-    sys.exit(code)
-
-
 def reports_errors(func: Callable[..., Any]) -> Callable[..., Any]:
     """Map NurbsfeedError to its message and exit code (never a traceback)."""
 

@@ -120,6 +120,10 @@ STRUCTURE_CHECKS = ("pass-through", "curve-missing", "curve-extra", "comment", "
                     "zero-feed", "zero-length", "feed-word", "g90-g91", "feed-restore")
 
 
+G90_G91_MESSAGE = ("the moves of a G91 block must be bracketed by G90 and G91 lines (the "
+                   "moves are absolute)")
+
+
 @dataclass(frozen=True)
 class Violation:
     check: str
@@ -557,8 +561,7 @@ def _parse_section(lines: list[str], i: int, section: _Section, block: CurveBloc
         if i < len(lines) and _body(lines[i]) == "G90":
             i += 1
         else:
-            findings.add("g90-g91", i + 1, "the moves of a G91 block must be bracketed by G90 "
-                         "and G91 lines (the moves are absolute)")
+            findings.add("g90-g91", i + 1, G90_G91_MESSAGE)
     first = i
     while i < len(lines) and MOVE_LINE_RE.fullmatch(_body(lines[i])):
         i += 1
@@ -575,8 +578,7 @@ def _parse_section(lines: list[str], i: int, section: _Section, block: CurveBloc
         if i < len(lines) and _body(lines[i]) == "G91":
             i += 1
         else:
-            findings.add("g90-g91", i + 1, "the moves of a G91 block must be bracketed by G90 "
-                         "and G91 lines (the moves are absolute)")
+            findings.add("g90-g91", i + 1, G90_G91_MESSAGE)
     if restore is not None:
         if i < len(lines) and lines[i] == restore:
             i += 1
