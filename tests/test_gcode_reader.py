@@ -488,6 +488,11 @@ FAST_PATH_CASES = {
     "interior knot splits": PREAMBLE + ("G06.2 P3 K0 X0 Y0 Z0\nK0 X1 Y1 Z0\nK0 X2 Y0 Z0\n"
                                         "K0.5 X3 Y1 Z0\nK0.5 X4 Y0 Z0\nK0.5 X5 Y1 Z0\n"),
     "knots after closing": PREAMBLE + ("G06.2 P2 K0 X0 Y0 Z0\nK0 X1 Y1 Z0\nK1\nK0 X2 Y0 Z0\n"),
+    "file ends among the points": PREAMBLE + "G06.2 K0 X0 Y0 Z0\nK0 X1 Y1 Z0\nK0 X2 Y0 Z0\nK0 X3 Y0 Z0",
+    "points split by a comment": (PREAMBLE + "G06.2 K0 X0 Y0 Z0\nK0 X1 Y1 Z0\n(note)\nK0 X2 Y0 Z0\n"
+                               "K0 X3 Y1 Z0\nK1\nK1\nK1\nK1\n"),
+    "bad weight among the points": (PREAMBLE + "G06.2 K0 X0 Y0 Z0\nK0 X1 Y1 Z0\nK0 X2 Y0 Z0\n"
+                                "K0 X3 Y1 Z0 R-1.\nK.5 X4 Y1 Z0\nK1\nK1\nK1\nK1\n"),
 }
 
 
