@@ -18,10 +18,22 @@ from tests.gcode_parse import moves
     (0.0001, 4, "0.0001"), (-0.00004, 4, "0."), (-0.00005, 4, "-0.0001"), (0.00005, 4, "0.0001"),
     (123456.78915, 4, "123456.7892"), (-0.1, 1, "-0.1"), (7.0, 0, "7."), (1e-9, 4, "0."),
     (99.99995, 4, "100."), (2.5, 5, "2.5"),
+    # every digit count and grouping: fractions of 1..8 digits, long integer parts
+    (1234567890123.0, 0, "1234567890123."), (-98765.4321, 4, "-98765.4321"),
+    (0.000123, 6, "0.000123"), (1.5, 9, "1.5"), (12345678.9, 1, "12345678.9"),
+    (-7.0000001, 7, "-7.0000001"), (100000.0, 8, "100000."),
+    (987654321.987654, 6, "987654321.987654"),
 ])
 def test_number_format_always_has_a_point_and_never_a_negative_zero(value, decimals,
                                                                    text) -> None:
     assert format_number(value, decimals) == text
+
+
+def test_decimals_beyond_int64_ticks_are_refused() -> None:
+    with pytest.raises(ValueError):
+        format_number(1.0, 19)
+    with pytest.raises(ValueError):
+        MoveWriter(io.BytesIO(), 19, 3, 0.001, "\n", np.zeros(3))
 
 
 def write(points: np.ndarray, decimals: int = 4, period_s: float = 0.001,

@@ -10,6 +10,7 @@ All of it runs in one loop in numba's subset, `_emit_moves`, point by point: rou
 of output units ("ticks"), drop a point equal to the last written one, compute F, and write the
 text: always a decimal point, trailing zeros dropped (`50.`, `12.34`), never `-0.`. F is written
 with `feed_decimals`, or more when F is small, so that it keeps 5 significant digits.
+`format_number` gives the same text for one value (it is `_emit_moves`' own X word).
 """
 
 from __future__ import annotations
@@ -27,46 +28,36 @@ CHUNK_POINTS = 65536  # points formatted per call: bounds the text buffer
 _BYTES_PER_LINE = 4 + 3 * 23 + 24 + 2
 
 _AXES = np.array([ord("X"), ord("Y"), ord("Z")], dtype=np.uint8)
+_FEED_POW10 = 10.0 ** np.arange(FEED_MAX_DECIMALS + 1)
+_LF = np.frombuffer(b"\n", dtype=np.uint8)
 _POW10 = np.array([10**k for k in range(20)], dtype=np.uint64)
 _ONES = np.array([48 + k % 10 for k in range(100)], dtype=np.uint8)  # "00".."99", digit by digit
 _TENS = np.array([48 + k // 10 for k in range(100)], dtype=np.uint8)
+MAX_DECIMALS = 18  # decimals written: ticks are int64, at most 19 digits
+# `_emit_moves` builds the number text with unsigned integers, digits and positions alike; these
+# are its constants, unsigned too (numba makes uint64 op int64 an int64, or even a float)
+_U1 = np.uint64(1)
+_U2 = np.uint64(2)
+_U4 = np.uint64(4)
+_U10 = np.uint64(10)
+_U100 = np.uint64(100)
+_U10K = np.uint64(10000)
 
 
 @jit
-def _emit_number(buf, pos, value, decimals):
-    """Write integer `value` * 10^-decimals as text at buf[pos:]; return the new position.
+def _put_pair(buf, end, pair):
+    """Write the two digits of pair (0..99) at buf[end - 2:end]; end unsigned."""
+    buf[end - _U1] = _ONES[pair]
+    buf[end - _U2] = _TENS[pair]
 
-    The digits are taken right to left from the magnitude as an unsigned integer (division by
-    a constant is then a multiplication), two at a time from a table of "00".."99", after the
-    fraction's trailing zeros are dropped; digit i from the right sits at end - 1 - i, one
-    further left once past the point.
-    """
-    if value < 0:
-        buf[pos] = 45  # '-'
-        pos += 1
-        value = -value
-    ten = np.uint64(10)
-    hundred = np.uint64(100)
-    digits = np.uint64(value)
-    width = decimals  # fraction digits written
-    while width > 0 and digits % ten == 0:
-        digits //= ten
-        width -= 1
-    n = width + 1  # at least one integer digit, "0." and "0.5"
-    while n < _POW10.size and digits >= _POW10[n]:
-        n += 1
-    end = pos + n + 1
-    buf[end - 1 - width] = 46  # '.'
-    i = 0
-    while i + 1 < n:
-        pair = digits % hundred
-        digits //= hundred
-        buf[end - 1 - i - (1 if i >= width else 0)] = _ONES[pair]
-        buf[end - 2 - i - (1 if i + 1 >= width else 0)] = _TENS[pair]
-        i += 2
-    if i < n:
-        buf[end - 1 - i - (1 if i >= width else 0)] = np.uint8(digits) + 48
-    return end
+
+@jit
+def _put_quad(buf, end, quad):
+    """Write the four digits of quad (0..9999) at buf[end - 4:end]; end unsigned. One division
+    by 100 gives both pairs, so digits come four per step of the division chain."""
+    high = quad // _U100
+    _put_pair(buf, end, quad - high * _U100)
+    _put_pair(buf, end - _U2, high)
 
 
 @jit
@@ -95,7 +86,7 @@ def _emit_moves(points, decimals, scale, unit, period_s, feed_decimals, pow10, e
                 buf):
     """Write the G1 lines of points (M, 3), which follow the state's last point one period
     apart, into buf; return the bytes used. scale = 10^decimals, unit = 10^-decimals; pow10[k]
-    = 10^k for the F decimals k.
+    = 10^k for the F decimals k; decimals <= MAX_DECIMALS.
 
     A point whose ticks equal the last written ones only adds its period to the next move.
     F = 60 |dP^| / (n T) from the ticks, written with the decimals that keep
@@ -110,6 +101,8 @@ def _emit_moves(points, decimals, scale, unit, period_s, feed_decimals, pow10, e
     lz = state[_Z]
     pending = state[_PENDING]
     last_feed = state[_FEED]
+    first_line = state[_FIRST]
+    moves = 0
     pos = 0
     for k in range(points.shape[0]):
         tx = _round_tick(points[k, 0], scale)
@@ -130,28 +123,84 @@ def _emit_moves(points, decimals, scale, unit, period_s, feed_decimals, pow10, e
         feed_ticks = int(math.floor(feed * pow10[feed_dec] + 0.5))
         # equal text <=> equal ticks / 10^decimals: compare at FEED_MAX_DECIMALS
         feed_norm = feed_ticks * int(pow10[FEED_MAX_DECIMALS - feed_dec])
-        first = True
-        if state[_FIRST]:
+        if first_line:
             buf[pos] = 71  # 'G'
             buf[pos + 1] = 49  # '1'
-            pos += 2
-            first = False
-            state[_FIRST] = 0
-        for axis in range(3):
-            tick = tx if axis == 0 else (ty if axis == 1 else tz)
-            last = lx if axis == 0 else (ly if axis == 1 else lz)
-            if tick != last:
-                if not first:
-                    buf[pos] = 32
-                    pos += 1
-                first = False
-                buf[pos] = axes[axis]
-                pos = _emit_number(buf, pos + 1, tick, decimals)
-        if feed_norm != last_feed:
-            buf[pos] = 32
-            buf[pos + 1] = 70  # 'F'
-            pos = _emit_number(buf, pos + 2, feed_ticks, feed_dec)
-            last_feed = feed_norm
+            buf[pos + 2] = 32
+            pos += 3
+            first_line = 0
+        # the words, each followed by a space: X, Y, Z when changed, then F when changed
+        for word in range(4):
+            if word < 3:
+                value = tx if word == 0 else (ty if word == 1 else tz)
+                last = lx if word == 0 else (ly if word == 1 else lz)
+                if value == last:
+                    continue
+                letter = axes[word]
+                dec = decimals
+            else:
+                if feed_norm == last_feed:
+                    continue
+                value = feed_ticks
+                letter = 70  # 'F'
+                dec = feed_dec
+                last_feed = feed_norm
+            buf[pos] = letter
+            pos += 1
+            # the number value * 10^-dec. Its digits are taken right to left from the magnitude
+            # as an unsigned integer (division by a constant is then a multiplication), four or
+            # two at a time from a table of "00".."99", and written right to left from the
+            # number's end: dec fraction digits, the point, the integer digits (at least one,
+            # "0." and "0.5"); then the fraction's trailing zeros are dropped. The positions are
+            # unsigned too, so that numba indexes buf without its negative-index wraparound.
+            # (Written out here rather than as a function: numba does not inline one this
+            # large, and the calls made the whole loop a third slower.)
+            if value < 0:
+                buf[pos] = 45  # '-'
+                pos += 1
+                value = -value
+            digits = np.uint64(value)
+            n = np.uint64(dec + 1)  # the digits to write: dec and at least one more
+            while digits >= _POW10[n]:
+                n += _U1
+            end = np.uint64(pos) + n + _U1
+            p = end
+            left = dec  # fraction digits still to write
+            for _ in range(4):  # bounded (dec <= MAX_DECIMALS): unrolled, unlike a while loop
+                if left < 4:
+                    break
+                _put_quad(buf, p, digits % _U10K)
+                digits //= _U10K
+                p -= _U4
+                left -= 4
+            if left >= 2:
+                _put_pair(buf, p, digits % _U100)
+                digits //= _U100
+                p -= _U2
+                left -= 2
+            if left == 1:
+                buf[p - _U1] = 48 + digits % _U10
+                digits //= _U10
+                p -= _U1
+            p -= _U1
+            buf[p] = 46  # '.'
+            while digits >= _U10K:
+                _put_quad(buf, p, digits % _U10K)
+                digits //= _U10K
+                p -= _U4
+            if digits >= _U100:
+                _put_pair(buf, p, digits % _U100)
+                digits //= _U100
+                p -= _U2
+            if digits >= _U10:
+                _put_pair(buf, p, digits)
+            else:
+                buf[p - _U1] = 48 + digits
+            while buf[end - _U1] == 48:  # trailing zeros; the point stops it
+                end -= _U1
+            buf[end] = 32
+            pos = np.int64(end) + 1
+        pos -= 1  # the last word's space
         for b in range(eol.size):
             buf[pos] = eol[b]
             pos += 1
@@ -159,12 +208,14 @@ def _emit_moves(points, decimals, scale, unit, period_s, feed_decimals, pow10, e
         ly = ty
         lz = tz
         pending = 0
-        state[_MOVES] += 1
+        moves += 1
     state[_X] = lx
     state[_Y] = ly
     state[_Z] = lz
     state[_PENDING] = pending
     state[_FEED] = last_feed
+    state[_FIRST] = first_line
+    state[_MOVES] += moves
     return pos
 
 
@@ -203,11 +254,17 @@ def hold_before_end(points: np.ndarray, decimals: int) -> np.ndarray:
     return held
 
 
+def _check_decimals(decimals: int) -> None:
+    if not 0 <= decimals <= MAX_DECIMALS:
+        raise ValueError(f"decimals must be from 0 to {MAX_DECIMALS}, not {decimals}")
+
+
 class MoveWriter:
     """Writes the G1 moves of one curve to a binary stream, chunk by chunk."""
 
     def __init__(self, out: BinaryIO, decimals: int, feed_decimals: int, period_s: float,
                  eol: str, start: np.ndarray) -> None:
+        _check_decimals(decimals)
         self.out = out
         self.decimals = decimals
         self.scale = 10.0**decimals
@@ -240,11 +297,17 @@ class MoveWriter:
 
 
 def format_number(value: float, decimals: int) -> str:
-    """The writer's number format for one value (used for comments and restoring lines)."""
-    ticks = int(round_ticks(np.array([[value, 0.0, 0.0]]), decimals)[0, 0])
-    buf = np.empty(32, dtype=np.uint8)
-    used = _emit_number(buf, 0, ticks, decimals)
-    return buf[:used].tobytes().decode("ascii")
+    """The writer's number format for one value (used for comments and restoring lines): the X
+    word that `_emit_moves` writes for a move to X = value."""
+    _check_decimals(decimals)
+    point = np.array([[value, 0.0, 0.0]])
+    state = np.zeros(7, dtype=np.int64)
+    state[_X] = round_ticks(point, decimals)[0, 0] ^ 1  # only X changes: "X<value> F<feed>\n"
+    state[_FEED] = -1
+    buf = np.empty(_BYTES_PER_LINE, dtype=np.uint8)
+    used = _emit_moves(point, decimals, 10.0**decimals, 10.0**-decimals, 1.0, 0, _FEED_POW10,
+                       _LF, _AXES, state, buf)
+    return buf[1:used].tobytes().decode("ascii").split(" ")[0]
 
 
 def cycle_comment(curve_index: int, name: str, n_points: int, period_s: float, method: str,
