@@ -14,10 +14,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from nurbsfeed.errors import CurveError, InputError
-from nurbsfeed.gcode import read_gcode
-from nurbsfeed.gcode.fanuc import NurbsCurveReader
+from nurbsfeed.gcode import point_lines, read_gcode
+from nurbsfeed.gcode.fanuc import _POINT_LINE, NurbsCurveReader
 from nurbsfeed.gcode.linuxcnc import uniform_knots
+from nurbsfeed.gcode.point_lines import RUN_LINES, _number, scan_point_lines
 from nurbsfeed.program import CurveBlock, PassThrough
+from tests.bench.programs import fanuc_program
 
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLES = ROOT / "samples"
@@ -37,6 +39,11 @@ def load(path: Path) -> str:
 
 def read(text: str, dialect: str = "auto", name: str = "t.nc") -> list:
     return list(read_gcode(Path(name), text, dialect))
+
+
+def test_lines_end_only_at_newline_and_keep_every_character() -> None:
+    text = "%\r\nG0 X1\n\nG1\rY2\r\nM30"
+    assert [item.text for item in read(text)] == ["%\r\n", "G0 X1\n", "\n", "G1\rY2\r\n", "M30"]
 
 
 def curves(items: list) -> list[CurveBlock]:
@@ -397,7 +404,8 @@ def test_curve_definition_errors_are_curve_errors(name: str) -> None:
 
 
 # ---- fuzz: mutated programs fail only with InputError -------------------------------------------
-SAMPLE_TEXTS = [load(p) for p in sorted(SAMPLES.glob("*.n*c"))] + [G06_2, G6_2, G5_2]
+SAMPLE_TEXTS = [load(p) for p in sorted(SAMPLES.glob("*.n*c"))] + [G06_2, G6_2, G5_2,
+                                                                   fanuc_program(1)]
 TOKENS = ["K1.", "K0", "K3", "X5.", "Y-2", "Z0", "R0.5", "R0", "P3", "P2", "P1", "Q1", "L4", "F0",
           "F1000.", "G06.2", "G6.2", "G5.2", "G5.3", "G1", "G0", "G91", "G90", "G41", "G40",
           "G28", "G93", "G92 X0", "G81", "G80", "G20", "G21", "M6", "#1=2.", "X#1", "(c)", ";",
@@ -453,7 +461,7 @@ def test_mutated_programs_fail_only_with_input_errors(case: tuple[str, str]) -> 
                                                                   for v in item.feed_mm_s)
 
 
-# ---- the control-point fast path reads like the words --------------------------------------------
+# ---- the control-point fast paths read like the words ------------------------------------------
 def outcome(text: str, dialect: str) -> object:
     """Everything a read yields (or the error it raises), comparable with ==."""
     try:
@@ -467,10 +475,57 @@ def outcome(text: str, dialect: str) -> object:
              item.feed_mm_s.tolist()) for item in items]
 
 
+def with_fast_paths(text: str, dialect: str) -> object:
+    """`outcome` with point runs read even where the scan is not compiled (NURBSFEED_NO_JIT=1
+    runs the very same scan as plain Python)."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(point_lines, "RUNS_ENABLED", True)
+        return outcome(text, dialect)
+
+
 def without_fast_path(text: str, dialect: str) -> object:
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(NurbsCurveReader, "take_line", lambda self, line_text, line: False)
+        patch.setattr(NurbsCurveReader, "take_run", lambda self, program, pos, line: (0, pos))
         return outcome(text, dialect)
+
+
+def lines_read_in_runs(text: str) -> int:
+    read_in_runs = 0
+    take_run = NurbsCurveReader.take_run
+
+    def counting(self: NurbsCurveReader, program: object, pos: int, line: int) -> tuple[int, int]:
+        nonlocal read_in_runs
+        n, end = take_run(self, program, pos, line)  # type: ignore[arg-type]
+        read_in_runs += n
+        return n, end
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(point_lines, "RUNS_ENABLED", True)
+        patch.setattr(NurbsCurveReader, "take_run", counting)
+        try:
+            read(text)
+        except InputError:
+            pass
+    return read_in_runs
+
+
+def points_curve(lines: list[str], order: int = 4, close: str = "K9\n", start: str = "X0 Y0 Z0",
+                 opening: str = PREAMBLE + "G06.2 P{order} ") -> str:
+    """A G06.2 curve of order `order` from `start`: `opening`, its clamped start, `lines`, and
+    `order` closing knots `close`."""
+    head = [f"{opening.format(order=order)}K0 {start} F600\n"] + [f"K0 {start}\n"] * (order - 1)
+    return "".join(head + lines) + close * order
+
+
+RUN = [f"K{j / 8:g} X{j * 1.25:.4f} Y{-j * 0.1:.3f} Z{j % 3 * 0.05:.2f} R{1 + j % 2 * 0.25}\n"
+       for j in range(1, 13)]  # 12 lines a run reads, knots 0.125 .. 1.5
+
+
+def run_with(index: int, line: str) -> list[str]:
+    lines = list(RUN)
+    lines[index] = line
+    return lines
 
 
 FAST_PATH_CASES = {
@@ -493,18 +548,195 @@ FAST_PATH_CASES = {
                                "K0 X3 Y1 Z0\nK1\nK1\nK1\nK1\n"),
     "bad weight among the points": (PREAMBLE + "G06.2 K0 X0 Y0 Z0\nK0 X1 Y1 Z0\nK0 X2 Y0 Z0\n"
                                 "K0 X3 Y1 Z0 R-1.\nK.5 X4 Y1 Z0\nK1\nK1\nK1\nK1\n"),
+    # runs: what a scan reads, and every line where it must stop
+    "run": points_curve(RUN) + "G1 X0\n",
+    "run, order 2 and 3": points_curve(RUN, 2) + points_curve(RUN[5:], 3, opening="G06.2 P3 ",
+                                                              start="X15 Y-1.2 Z0"),
+    "run, crlf": (points_curve(RUN) + "G1 X0\n").replace("\n", "\r\n"),
+    "run, lower case": points_curve([line.lower() for line in RUN]),
+    "run, mixed case": points_curve([line.swapcase() if j % 3 else line
+                                     for j, line in enumerate(RUN)]),
+    "run, mixed R and no R": points_curve([line.split(" R")[0] + "\n" if j % 2 else line
+                                           for j, line in enumerate(RUN)]),
+    "run, G91": points_curve([f"K{j} X0.1 Y0.2 Z-0.3 R0.7\n" for j in range(1, 30)], close="K99\n",
+                             opening=PREAMBLE + "G0 X0.3 Y0.7 Z-.1\nG91\nG06.2 P{order} ")
+                + "G90\n",
+    "run, longer than one scan": points_curve([f"K{j} X{j}.5 Y-{j}.25 Z0 R1\n"
+                                               for j in range(1, RUN_LINES * 2 + 7)], 3,
+                                              close=f"K{RUN_LINES * 2 + 9}\n"),
+    "run, more than one curve": (points_curve(RUN) + points_curve(RUN, start="X15 Y-1.2 Z0",
+                                                                  opening="")
+                                 + "M30\n"),
+    "run at the end of the file, no newline": points_curve(RUN, close="")[:-1],
+    "run at the end of the file, lone CR": points_curve(RUN, close="")[:-1] + "\r",
+    "run ends before knot-only blocks, no newline": points_curve(RUN)[:-1],
+    "run, knot decreasing in the middle": points_curve(run_with(6, "K.100 X1 Y1 Z1\n")),
+    "run, knot repeated twice": points_curve(run_with(6, RUN[5].split(" X")[0] + " X1 Y2 Z3\n")),
+    "run, knot repeated the order": points_curve(
+        RUN[:6] + ["K0.75 X1 Y1 Z1\n", "K0.75 X1 Y2 Z1\n", "K0.75 X1 Y3 Z1\n"] + RUN[6:]),
+    "run, weight zero in the middle": points_curve(run_with(6, "K0.8 X1 Y1 Z1 R0\n")),
+    "run, weight negative in the middle": points_curve(run_with(6, "K0.8 X1 Y1 Z1 R-0.5\n")),
+    "run, F word in the middle": points_curve(run_with(6, "K0.8 X1 Y1 Z1 R1 F300\n")),
+    "run, G91 line in the middle": points_curve(run_with(6, "G91\n")),
+    "run, comment in the middle": points_curve(run_with(6, "K0.8 X1 Y1 Z1 (c)\n")),
+    "run, line with spaces": points_curve(run_with(6, "K0.8  X1 Y1 Z1\n")),
+    "run, trailing space": points_curve(run_with(6, "K0.8 X1 Y1 Z1 \n")),
+    "run, tab": points_curve(run_with(6, "K0.8\tX1 Y1 Z1\n")),
+    "run, omitted axis": points_curve(run_with(6, "K0.8 X1 Y1\n")),
+    "run, empty line": points_curve(run_with(6, "\n")),
+    "run, lone CR inside": points_curve(run_with(6, "K0.8 X1\r Y1 Z1\n")),
+    "run, exponent": points_curve(run_with(6, "K0.8 X1e3 Y1 Z1\n")),
+    "run, two points": points_curve(run_with(6, "K0.8 X1.2.3 Y1 Z1\n")),
+    "run, 17 significant digits": points_curve(run_with(6, "K0.8 X1.2345678901234567 Y1 Z1\n")),
+    "run, 16 digits above 2**53": points_curve(run_with(6, "K0.8 X9007199254740993 Y1 Z1\n")),
+    "run, 16 digits": points_curve(run_with(6, "K0.8 X0.1234567890123456 Y1 Z1\n")),
+    "run, 23 fraction digits": points_curve(run_with(6, "K0.8 X0.00000000000000000000001 Y1 Z1\n")),
+    "run, 22 fraction digits": points_curve(run_with(6, "K0.8 X0.0000000000000000000001 Y1 Z1\n")),
+    "run, signed zeros and bare points": points_curve(run_with(6, "K+.8 X-0 Y-0. Z+0.0 R.5\n")),
+    "run, not ASCII": points_curve(RUN) + "(fin \u00e9)\n",
+    # the next curve starts within half a unit in the coarser last decimal of X1.2 / X1.24
+    "run, decimals of its last point": (points_curve(run_with(11, "K1.5 X1.2 Y-1.25 Z0.05\n"))
+                                        + points_curve(RUN, start="X1.24 Y-1.25 Z0.05",
+                                                       opening="")),
+    "run, clamped end after it": points_curve(RUN, close="K9\nK9\nK10\nK10\n"),
+    "run, too few knot-only blocks": points_curve(RUN, close="") + "K9\nK9\nG1 X0\n",
 }
 
 
 @pytest.mark.parametrize("name", sorted(FAST_PATH_CASES))
-def test_control_point_fast_path_reads_like_the_words(name: str) -> None:
+def test_control_point_fast_paths_read_like_the_words(name: str) -> None:
     text = FAST_PATH_CASES[name]
-    assert outcome(text, "auto") == without_fast_path(text, "auto")
+    assert with_fast_paths(text, "auto") == without_fast_path(text, "auto")
+
+
+def test_runs_read_the_point_lines_past_the_clamped_start() -> None:
+    assert lines_read_in_runs(FAST_PATH_CASES["run"]) == len(RUN)
+    assert lines_read_in_runs(FAST_PATH_CASES["run, knot decreasing in the middle"]) == 6
+    assert lines_read_in_runs(FAST_PATH_CASES["run, 17 significant digits"]) == len(RUN) - 1
+    assert lines_read_in_runs(FAST_PATH_CASES["run, not ASCII"]) == 0
+    text = fanuc_program(3)
+    assert lines_read_in_runs(text) == 3 * (50 - 4)  # all but each curve's first 4 lines
+    assert with_fast_paths(text, "auto") == without_fast_path(text, "auto")
+
+
+def test_an_error_after_a_run_names_its_line_and_the_run_s_last_knot() -> None:
+    text = FAST_PATH_CASES["run, knot decreasing in the middle"]
+    with pytest.raises(CurveError) as caught, pytest.MonkeyPatch.context() as patch:
+        patch.setattr(point_lines, "RUNS_ENABLED", True)
+        read(text)
+    assert str(caught.value) == ("t.nc:13:1: K.100: knots must not decrease (K0.75 on line 12 "
+                                 "before it) (Mitsubishi error P551)")
 
 
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(mutated_programs())
-def test_control_point_fast_path_reads_mutated_programs_like_the_words(case: tuple[str, str]
-                                                                       ) -> None:
+def test_control_point_fast_paths_read_mutated_programs_like_the_words(case: tuple[str, str]
+                                                                        ) -> None:
     text, dialect = case
-    assert outcome(text, dialect) == without_fast_path(text, dialect)
+    assert with_fast_paths(text, dialect) == without_fast_path(text, dialect)
+
+
+# ---- the run scan's numbers are float()'s, bit for bit ------------------------------------------
+def codes(text: str) -> np.ndarray:
+    return np.frombuffer(text.encode("ascii"), dtype=np.uint8)
+
+
+def same_double(a: float, b: float) -> bool:
+    return bool(np.float64(a).view(np.int64) == np.float64(b).view(np.int64))
+
+
+def significant_digits(number: str) -> int:
+    return len(re.sub(r"[^0-9]", "", number).lstrip("0"))
+
+
+def fraction_digits(number: str) -> int:
+    return len(number.partition(".")[2])
+
+
+NUMBER_EDGES = ["0", "-0", "+0", "-0.0", "0.", "-0.", ".5", "-.5", "+.5", "5.", "000123.4500",
+                "0.1", "0.3", "2.675", "1.005", "9.999999999999999", "123456789012345",
+                "1234567890123456", "9007199254740992", "9007199254740993", "12345678901234567",
+                "0.000000000000000000001", "0.0000000000000000000001", "0.00000000000000000000001",
+                "1.0000000000000000000000", "0.1234567890123456", "0.12345678901234567",
+                "-123.456789012345", "0000000000000000000000000001.5", "4503599627370497.5"]
+
+
+@st.composite
+def plain_numbers(draw: st.DrawFn) -> str:
+    """`[+-]?(\\d+(\\.\\d*)?|\\.\\d+)` with up to 20 digits each side, leading zeros included."""
+    sign = draw(st.sampled_from(["", "+", "-"]))
+    whole = draw(st.text("0123456789", max_size=20))
+    point = draw(st.booleans()) or not whole
+    fraction = draw(st.text("0123456789", min_size=0 if whole else 1, max_size=25))
+    return sign + whole + ("." + fraction if point else "")
+
+
+def check_number(number: str) -> None:
+    value, end = _number(codes(number), 0)
+    significant, fraction = significant_digits(number), fraction_digits(number)
+    if significant <= 15 and fraction <= 22:
+        assert end == len(number), number  # Clinger's fast path covers it
+    if significant > 16 or fraction > 22:
+        assert end == -1, number  # beyond it: left to float()
+    if end != -1:
+        assert end == len(number) and same_double(value, float(number)), number
+
+
+@pytest.mark.parametrize("number", NUMBER_EDGES)
+def test_scan_numbers_are_float_s_at_the_edges(number: str) -> None:
+    check_number(number)
+
+
+@settings(max_examples=2000, deadline=None)
+@given(plain_numbers())
+def test_scan_numbers_are_float_s(number: str) -> None:
+    check_number(number)
+
+
+def test_scan_numbers_are_float_s_seeded() -> None:
+    """Shop-shaped numbers, 4 and 6 decimals as CAM posts write them, and every digit count."""
+    rng = random.Random(20260522)
+    for _ in range(20000):
+        digits = rng.randrange(1, 16)
+        mantissa = rng.randrange(10 ** digits)
+        point = rng.randrange(0, min(digits, 22) + 1)
+        text = str(mantissa).rjust(digits, "0")
+        number = rng.choice(["", "-"]) + text[:len(text) - point] + "." + text[len(text) - point:]
+        check_number(number)
+
+
+@st.composite
+def point_line_texts(draw: st.DrawFn) -> str:
+    """Lines near the point-line grammar: its words, letters, separators and endings, varied."""
+    words = []
+    for letter in draw(st.sampled_from(["KXYZ", "KXYZR", "KXYZR", "KXY", "KXYZF", "XKYZ"])):
+        if draw(st.integers(0, 15)) == 0:
+            letter = draw(st.sampled_from("KXYZRFG"))
+        words.append(draw(st.sampled_from([letter, letter.lower()])) + draw(plain_numbers()))
+    seps = [draw(st.sampled_from([" "] * 12 + ["", "  ", "\t", "\r"])) for _ in words[1:]]
+    line = words[0] + "".join(sep + word for sep, word in zip(seps, words[1:]))
+    return line + draw(st.sampled_from(["\n", "\r\n", "", "\r", " \n", "\n\r", "\r\r\n"]))
+
+
+@settings(max_examples=2000, deadline=None)
+@given(point_line_texts(), st.sampled_from(["", "K9 X1 Y2 Z3\n", "G1 X0\n"]))
+def test_scan_reads_exactly_the_point_lines(line: str, after: str) -> None:
+    """A scan reads the line iff _POINT_LINE matches it, its numbers are within Clinger's fast
+    path, its knot is above the one before and its weight positive; then float()'s values."""
+    text = line + after
+    values = np.empty((RUN_LINES, 5))
+    n, last_start, end = scan_point_lines(codes(text), 0, -1.0, values)
+    first_line = text[:text.find("\n") + 1 or len(text)]
+    match = _POINT_LINE.fullmatch(first_line)
+    numbers = [] if match is None else [g for g in match.groups() if g is not None]
+    readable = match is not None and all(
+        significant_digits(g) <= 15 and fraction_digits(g) <= 22 for g in numbers)
+    if readable and float(numbers[0]) > -1.0 and (len(numbers) == 4 or float(numbers[4]) > 0):
+        assert n >= 1 and end >= len(first_line)
+        expected = [float(g) for g in numbers] + [1.0] * (5 - len(numbers))
+        assert all(same_double(a, b) for a, b in zip(values[0].tolist(), expected))
+    if match is None:
+        assert n == 0 and end == 0
+    if n:
+        assert match is not None and text[:end] == first_line + (after if n == 2 else "")
+        assert last_start == (len(first_line) if n == 2 else 0)

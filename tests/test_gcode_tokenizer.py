@@ -9,7 +9,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from nurbsfeed.errors import InputError
-from nurbsfeed.gcode.tokenizer import Block, Param, _scan_line, iter_lines, printable, tokenize_line
+from nurbsfeed.gcode.tokenizer import Block, Param, _scan_line, printable, tokenize_line
 
 
 def words(line: str, params: dict[int, Param] | None = None) -> list[tuple[str, float, int]]:
@@ -127,13 +127,6 @@ def test_bad_lines(line: str, col: int, message: str) -> None:
 
 def test_printable_escapes_undecodable_bytes_and_controls() -> None:
     assert printable("a\udcff\x00b") == "a\\xff\\x00b"
-
-
-def test_iter_lines_keeps_every_character() -> None:
-    text = "%\r\nG0 X1\n\nG1\rY2\r\nM30"
-    lines = list(iter_lines(text))
-    assert lines == [(1, "%\r\n"), (2, "G0 X1\n"), (3, "\n"), (4, "G1\rY2\r\n"), (5, "M30")]
-    assert "".join(line for _, line in lines) == text
 
 
 # ---- properties ---------------------------------------------------------------------------------

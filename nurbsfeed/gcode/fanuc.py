@@ -61,6 +61,7 @@ from nurbsfeed.gcode.nurbs_block import (
     motion_words,
     point_text,
 )
+from nurbsfeed.gcode.point_lines import ProgramCodes, scan_point_lines
 from nurbsfeed.gcode.tokenizer import PLAIN_NUMBER, Block, Word, decimals_written
 
 DEFAULT_ORDER = 4
@@ -82,7 +83,10 @@ class NurbsCurveReader:
         self.name = curve_name(first, start)
         self.label = "G6.2" if linuxcnc else "G06.2"
         self.knots: list[float] = []
-        self.knot_words: list[Word] = []
+        # the words of the knots the messages name (a run of point lines keeps no other words)
+        self.first_knot: Word | None = None
+        self.last_knot: Word | None = None
+        self.first_closing_knot: Word | None = None
         self.points: list[tuple[float, float, float]] = []
         self.weights: list[float] = []
         self.decimals: dict[str, int | None] = {}
@@ -145,7 +149,7 @@ class NurbsCurveReader:
         knot = Word("K", k, k_text, decimals_written(k_text), line, 1)
         if k > self.knots[-1] and len(self.knots) >= self.order:
             self.knots.append(k)  # past the clamped start and increasing: _knot has no check
-            self.knot_words.append(knot)
+            self.last_knot = knot
         else:
             self._knot(knot, closing=False)
         if self.state.incremental:
@@ -155,6 +159,35 @@ class NurbsCurveReader:
         self.points.append((x, y, z))
         self.weights.append(weight)
         return True
+
+    def take_run(self, program: ProgramCodes, pos: int, line: int) -> tuple[int, int]:
+        """`take_line` for the run of lines from text position `pos` (line number `line`) on,
+        scanned at once in compiled code (point_lines.py). Reads the lines `take_line` would
+        read without a check of `_knot`: past the clamped start, knots increasing, weights
+        positive; the first line the scan refuses is left to `take_line` or `take`.
+        Returns (lines read, text position after them); (0, pos) when it read none."""
+        if self.n_closing or len(self.knots) < self.order:
+            return 0, pos
+        n, last_start, end = scan_point_lines(program.codes, pos, self.knots[-1], program.values)
+        if not n:
+            return 0, pos
+        knots, xs, ys, zs, weights = program.values[:n].T.tolist()
+        self.knots.extend(knots)
+        if self.state.incremental:  # take_line's additions, in its order
+            x, y, z = self.points[-1]
+            for dx, dy, dz in zip(xs, ys, zs):
+                x, y, z = x + dx, y + dy, z + dz
+                self.points.append((x, y, z))
+        else:
+            self.points.extend(zip(xs, ys, zs))
+        self.weights.extend(weights)
+        match = _POINT_LINE.fullmatch(program.text, last_start, end)
+        assert match is not None, "scan_point_lines reads only _POINT_LINE lines"
+        k_text, x_text, y_text, z_text, _ = match.groups()
+        self.last_knot = Word("K", self.knots[-1], k_text, decimals_written(k_text),
+                              line + n - 1, 1)
+        self.decimal_texts = (x_text, y_text, z_text)
+        return n, end
 
     def take(self, block: Block) -> bool:
         """Read the next block of the curve; True when it was the last knot-only block."""
@@ -271,8 +304,8 @@ class NurbsCurveReader:
         """Append a knot, checking order, clamped start and repetition as it arrives."""
         state = self.state
         value = word.value
-        if self.knots and value < self.knots[-1]:
-            before = self.knot_words[-1]
+        before = self.last_knot
+        if before is not None and value < before.value:
             raise CurveError(f"{word.name}: knots must not decrease ({before.name} on line "
                              f"{before.line} before it) (Mitsubishi error P551)",
                              state.where(word))
@@ -282,8 +315,9 @@ class NurbsCurveReader:
         if run > self.order:
             raise CurveError(f"{word.name}: knot {value:g} repeated {run} times in a row; at most "
                              f"the order {self.order} (Fanuc alarm PS1008)", state.where(word))
-        if not closing and 0 < len(self.knots) < self.order and value != self.knots[0]:
-            first = self.knot_words[0]
+        first = self.first_knot
+        if (not closing and first is not None and len(self.knots) < self.order
+                and value != first.value):
             raise CurveError(f"{word.name}: the first {self.order} knots must be equal (clamped "
                              f"start, order {self.order}); {first.name} on line {first.line} "
                              "starts the curve (Fanuc alarm PS1007)", state.where(word))
@@ -292,7 +326,9 @@ class NurbsCurveReader:
                              f"order) would split the curve in two; at most {self.order - 1}",
                              state.where(word))
         self.knots.append(value)
-        self.knot_words.append(word)
+        self.last_knot = word
+        if self.first_knot is None:
+            self.first_knot = word
 
     def _closing_knot(self, word: Word) -> bool:
         state = self.state
@@ -300,12 +336,14 @@ class NurbsCurveReader:
             raise CurveError(f"{count(len(self.points), 'control point')} fewer than the "
                              f"order {self.order}: a curve of order {self.order} needs at least "
                              f"{self.order}", state.where(word))
-        if self.n_closing and word.value > self.knots[-1]:
-            first = self.knot_words[-self.n_closing]
+        first = self.first_closing_knot
+        if first is not None and word.value > self.knots[-1]:
             raise CurveError(f"{word.name}: the last {self.order} knots must be equal (clamped "
                              f"end, order {self.order}); {first.name} on line {first.line} is the "
                              "first of them (Fanuc alarm PS1007)", state.where(word))
         self._knot(word, closing=True)
+        if self.first_closing_knot is None:
+            self.first_closing_knot = word
         self.n_closing += 1
         return self.n_closing == self.order
 

@@ -2,7 +2,8 @@
 
 Call chain for one line: `tokenizer.tokenize_line` (for a plain "K_ X_ Y_ Z_ [R_]" line inside
 a G06.2 curve, `fanuc.NurbsCurveReader.take_line` reads the text directly instead, with the same
-result) -> if a NURBS block is open, its reader
+result, and `take_run` reads a whole run of such lines at once in compiled code, point_lines.py)
+-> if a NURBS block is open, its reader
 (`fanuc.NurbsCurveReader` or `linuxcnc.G52BlockReader`) takes the block, and the CurveBlock is
 yielded when the block completes; otherwise `_start` decides whether the block opens a NURBS
 block, and if not `modal.ModalState.apply` executes it and the line passes through unchanged.
@@ -13,9 +14,9 @@ blocks and G6.2 curves with LinuxCNC's rules. `auto`: G5.2 is LinuxCNC; G6.2 is 
 first block has a Q word, Fanuc otherwise; a curve that continues a modal G6.2 follows the rules
 of the curve before it.
 
-Nothing is held but the modal state, the parameters and the NURBS block being read (its control
-points, not its lines: their line ending is all a CurveBlock keeps), so a program of any length
-is read in constant memory.
+Besides the text (and, for `take_run`, one copy of it as ASCII codes), nothing is held but the
+modal state, the parameters and the NURBS block being read (its control points, not its lines:
+their line ending is all a CurveBlock keeps).
 """
 
 from __future__ import annotations
@@ -28,7 +29,8 @@ from nurbsfeed.gcode.fanuc import NurbsCurveReader
 from nurbsfeed.gcode.linuxcnc import G52BlockReader
 from nurbsfeed.gcode.modal import AXES, G5_2, G5_3, G6_2, NO_POSITION_EFFECT, ModalState
 from nurbsfeed.gcode.nurbs_block import FinishedCurve, first_word, motion_words
-from nurbsfeed.gcode.tokenizer import Block, Param, iter_lines, tokenize_line
+from nurbsfeed.gcode.point_lines import ProgramCodes
+from nurbsfeed.gcode.tokenizer import Block, Param, tokenize_line
 from nurbsfeed.program import CurveBlock, PassThrough, ProgramItem
 
 DIALECTS = ("auto", "fanuc", "linuxcnc")
@@ -59,8 +61,27 @@ class _Reader:
         self.last_curve: NurbsCurveReader | None = None  # the modal G6.2 curve's rules
 
     def items(self, text: str) -> Iterator[ProgramItem]:
-        for line, line_text in iter_lines(text):
+        program = ProgramCodes.of(text)
+        # Once a scan reads no line, the next waits for a line take_line reads: where a program
+        # writes its points in another form (N words, F on every line), a scan per line would
+        # cost more than it saves.
+        scan = True
+        pos = 0  # where the next line starts
+        line = 0
+        while pos < len(text):
+            line += 1
+            if scan and program is not None and isinstance(self.open, NurbsCurveReader):
+                n, after = self.open.take_run(program, pos, line)
+                if n:  # a run of plain control points, scanned at once
+                    line += n - 1
+                    pos = after
+                    continue
+                scan = False
+            end = text.find("\n", pos) + 1 or len(text)  # only "\n" ends a line
+            line_text = text[pos:end]
+            pos = end
             if isinstance(self.open, NurbsCurveReader) and self.open.take_line(line_text, line):
+                scan = True
                 continue  # a plain control point, read straight from the text
             block = tokenize_line(line_text, line, self.path, self.params)
             if self.open is not None:

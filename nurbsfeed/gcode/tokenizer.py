@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -37,7 +37,6 @@ _PARAM_REF = re.compile(rf"([+-]?){_SPACE}*#{_SPACE}*(\d+)")
 _ASSIGN = re.compile(rf"#{_SPACE}*(\d+){_SPACE}*=")
 _LETTER_RUN = re.compile(r"[A-Za-z]{2,}")
 _FUNCTION = re.compile(rf"([A-Za-z]{{2,}}){_SPACE}*\[")
-_LINE = re.compile(r"[^\n]*\n|[^\n]+\Z")
 # The fast paths: a line of words separated by single spaces (what posts write), then a line of
 # plain words and comments only (no %, /, #, [ or statements).
 PLAIN_NUMBER = r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)"  # a number written without spaces
@@ -128,16 +127,6 @@ class Block(NamedTuple):
     def is_inert(self) -> bool:
         """Nothing to execute: blank, comment-only, `%`, or only a sequence number N."""
         return not self.assignments and all(word.letter == "N" for word in self.words)
-
-
-def iter_lines(text: str) -> Iterator[tuple[int, str]]:
-    """(1-based line number, line including its "\\n" or "\\r\\n"), lazily.
-
-    Only "\\n" ends a line, so a lone "\\r" stays inside its line (where it counts as a space) and
-    "".join of the lines is `text` exactly.
-    """
-    for number, match in enumerate(_LINE.finditer(text), start=1):
-        yield number, match.group()
 
 
 def code_name(letter: str, code: int) -> str:
