@@ -61,6 +61,7 @@ LANDING_MARGIN_REL = 1e-8  # the first run's sigma lies this far (relative) abov
 BUMP_PERIODS = 32
 BUMP_MAX_SLOWDOWN = 1e-4
 CHORD_ITERATIONS = 200
+EPS = float(np.finfo(float).eps)
 
 
 @jit
@@ -284,7 +285,7 @@ class _Bump:
 
     def removed(self, t_s: np.ndarray) -> np.ndarray:
         """Arc taken out by plan time t (per unit of e): v_c integral of w, (M,) -> (M,)."""
-        x = np.clip(t_s - self.t_start, 0.0, self.duration)
+        x = np.minimum(np.maximum(t_s - self.t_start, 0.0), self.duration)
         d = self.duration
         return self.v_mm_s * (0.5 * x - d / (4.0 * math.pi) * np.sin(2.0 * math.pi * x / d))
 
@@ -358,7 +359,7 @@ def _land(curve, code: int, u_start: float, u_end: float, end_point: np.ndarray,
     # Each step rounds the point to ~eps (length + coordinates), and those errors add up like a
     # random walk: the landing resolves only to about sqrt(N) of them (measured: up to 1x on
     # curves 1 m from the origin); ask no more, but never accept less than LANDING_REL_MAX.
-    noise = np.finfo(float).eps * (total + float(np.max(np.abs(end_point)))) * math.sqrt(n)
+    noise = EPS * (total + max(abs(float(x)) for x in end_point)) * math.sqrt(n)
     last_ds = float(ds[-1])
     tol = max(LANDING_REL_TOL * last_ds, min(noise, LANDING_REL_MAX * last_ds))
     head = ds[:-1]
@@ -529,7 +530,9 @@ def interpolate(plan: Plan, method: str = "rk2c") -> Interpolation:
         sigmas.append(s)
         slowdowns.append(landing.slowdown)
         k0 += n
-    s_all = np.concatenate([[0.0], np.cumsum(ds_all)])
+    s_all = np.empty(n_all)
+    s_all[0] = 0.0
+    np.cumsum(ds_all, out=s_all[1:])
     # at rest at the start (and at every stretch start): v = a = 0, the jerk of the first piece
     first_j = float(law.jerk_mm_s3[0]) if law.jerk_mm_s3.size else 0.0
     first_scale = float(plan.piece_scale[0]) if plan.piece_scale.size else 1.0
