@@ -55,7 +55,7 @@ class NurbsCurve:
         if pts.ndim != 2 or pts.shape[1] not in (2, 3):
             raise CurveError("control points must be lists of 2 or 3 numbers, "
                              f"got an array of shape {pts.shape}")
-        if not np.all(np.isfinite(pts)):
+        if not np.isfinite(pts).all():
             bad = int(np.argwhere(~np.isfinite(pts))[0][0])
             raise CurveError(f"control point {bad} is not finite: {pts[bad].tolist()}")
         if pts.shape[1] == 2:
@@ -74,8 +74,8 @@ class NurbsCurve:
             if w.shape != (n_ctrl,):
                 raise CurveError(f"{n_ctrl} control points need {n_ctrl} weights, "
                                  f"got {w.size}")
-            bad_w = np.flatnonzero(~(np.isfinite(w) & (w > 0)))
-            if bad_w.size:
+            if not (np.isfinite(w).all() and (w > 0).all()):
+                bad_w = np.flatnonzero(~(np.isfinite(w) & (w > 0)))
                 raise CurveError(f"weight {bad_w[0]} must be positive and finite, "
                                  f"not {float(w[bad_w[0]])!r}")
         try:
@@ -112,7 +112,11 @@ class NurbsCurve:
     @cached_property
     def span_breaks(self) -> np.ndarray:
         """(m,) the distinct knot values from u_min to u_max, in order."""
-        return _readonly(np.unique(self.knots[self.degree:len(self.knots) - self.degree]))
+        inner = self.knots[self.degree:len(self.knots) - self.degree]  # non-decreasing
+        first = np.empty(inner.size, dtype=bool)  # the first of each run of equal knots
+        first[0] = True
+        np.not_equal(inner[1:], inner[:-1], out=first[1:])
+        return _readonly(inner[first])
 
     @cached_property
     def is_degenerate(self) -> bool:
@@ -157,21 +161,20 @@ def check_knots(k: np.ndarray, degree: int, n_ctrl: int) -> None:
     if k.ndim != 1 or k.size != n_ctrl + order:
         raise CurveError(f"{n_ctrl} control points of degree {degree} need "
                          f"{n_ctrl + order} knots (control points + order), got {k.size}")
-    if not np.all(np.isfinite(k)):
+    if not np.isfinite(k).all():
         raise CurveError(f"knot {int(np.argmax(~np.isfinite(k)))} is not finite")
-    dec = np.flatnonzero(np.diff(k) < 0)
-    if dec.size:
-        i = int(dec[0]) + 1
+    if (k[1:] < k[:-1]).any():
+        i = int(np.flatnonzero(k[1:] < k[:-1])[0]) + 1
         raise CurveError(f"knots must not decrease: knot {i} ({k[i]:g}) < knot {i - 1} "
                          f"({k[i - 1]:g})")
-    if np.any(k[:order] != k[0]) or np.any(k[-order:] != k[-1]):
+    if (k[:order] != k[0]).any() or (k[-order:] != k[-1]).any():
         raise CurveError(f"knot vector must be clamped: the first {order} and the last {order} "
                          f"knots must be equal (order {order})")
     if k[-1] <= k[0]:
         raise CurveError(f"knot range is empty: all knots are {k[0]:g}")
     interior = k[order:-order]  # non-decreasing: equal knots are neighbours
     if interior.size:
-        if interior.size > degree and np.any(interior[degree:] == interior[:-degree]):
+        if interior.size > degree and (interior[degree:] == interior[:-degree]).any():
             values, counts = np.unique(interior, return_counts=True)
             bad = values[np.argmax(counts > degree)]
             raise CurveError(f"interior knot {bad:g} is repeated {int(counts.max())} times; at "
