@@ -302,7 +302,8 @@ def format_number(value: float, decimals: int) -> str:
     _check_decimals(decimals)
     point = np.array([[value, 0.0, 0.0]])
     state = np.zeros(7, dtype=np.int64)
-    state[_X] = round_ticks(point, decimals)[0, 0] ^ 1  # only X changes: "X<value> F<feed>\n"
+    # the last point differs from this one in X only, so the move is "X<value> F<feed>\n"
+    state[_X] = round_ticks(point, decimals)[0, 0] + 1
     state[_FEED] = -1
     buf = np.empty(_BYTES_PER_LINE, dtype=np.uint8)
     used = _emit_moves(point, decimals, 10.0**decimals, 10.0**-decimals, 1.0, 0, _FEED_POW10,
