@@ -272,7 +272,6 @@ class MoveWriter:
         self.feed_decimals = feed_decimals
         self.period_s = period_s
         self.eol = np.frombuffer(eol.encode("ascii"), dtype=np.uint8)
-        self.pow10 = 10.0 ** np.arange(FEED_MAX_DECIMALS + 1)
         self.state = np.zeros(7, dtype=np.int64)
         self.state[:3] = round_ticks(np.asarray(start, dtype=float)[None, :], decimals)[0]
         self.state[_FEED] = -1
@@ -291,7 +290,7 @@ class MoveWriter:
             self.buf = np.empty(size, dtype=np.uint8)
         for lo in range(0, len(points), CHUNK_POINTS):
             used = _emit_moves(points[lo:lo + CHUNK_POINTS], self.decimals, self.scale,
-                               self.unit, self.period_s, self.feed_decimals, self.pow10,
+                               self.unit, self.period_s, self.feed_decimals, _FEED_POW10,
                                self.eol, _AXES, self.state, self.buf)
             self.out.write(self.buf[:used])
 
