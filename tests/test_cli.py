@@ -16,6 +16,7 @@ import pytest
 from click.testing import CliRunner
 
 from nurbsfeed.cli import main
+from nurbsfeed.jit import JIT_ENABLED
 from tests.conftest import ROOT, SAMPLES
 from tests.gcode_parse import moves
 
@@ -243,6 +244,29 @@ def test_jit_and_plain_python_kernels_write_identical_programs(tmp_path: Path) -
         outputs.append((out.read_bytes(), np.loadtxt(trace, delimiter=",", skiprows=1)))
     assert outputs[0][0] == outputs[1][0]
     assert np.allclose(outputs[0][1], outputs[1][1], rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.skipif(not JIT_ENABLED, reason="numba is not in use")
+def test_kernels_load_from_the_cache_without_numbas_compiler_registries(tmp_path: Path) -> None:
+    """nurbsfeed.jit's cache skips numba's registry refresh, which only compiling needs: a
+    conversion whose kernels all come from the cache (the second run) imports none of the
+    modules that refresh brings in, and writes the same program as the first run."""
+    probe = ("import sys\n"
+             "from nurbsfeed.cli import main\n"
+             "try:\n"
+             "    main(['convert', %r, '-o', %r, '-q'])\n"
+             "except SystemExit as exc:\n"
+             "    assert not exc.code, exc.code\n"
+             "print('numba.np.polynomial.polynomial_core' in sys.modules)\n")
+    outputs = []
+    for name in ("first.nc", "second.nc"):
+        out = tmp_path / name
+        code = probe % (str(SAMPLES / "fanuc-quadratic.nc"), str(out))
+        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                              check=True)
+        outputs.append((done.stdout.strip(), out.read_bytes()))
+    assert outputs[1][0] == "False"  # the second run loaded everything from the cache
+    assert outputs[0][1] == outputs[1][1]
 
 
 def test_taylor1_conversions_warn_that_they_can_break_the_limits(tmp_path: Path) -> None:
