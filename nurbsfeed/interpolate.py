@@ -41,6 +41,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -194,20 +195,68 @@ class Interpolation:
     period_s: float
     u: np.ndarray
     points: np.ndarray  # C(u_k), full precision; first and last exactly the curve ends
-    t_s: np.ndarray
-    s_mm: np.ndarray  # sum of the targets actually stepped
-    v_mm_s: np.ndarray
-    a_mm_s2: np.ndarray
-    j_mm_s3: np.ndarray
     ds_mm: np.ndarray  # the targets actually stepped, (N,)
     sigma: np.ndarray  # (P,) target scale of each stretch between rests
     slowdown: np.ndarray  # (P,) relative depth e of each stretch's landing bump (0: none)
     landing_runs: float  # kernel runs over all stretches, a run from a bump on in its share
     step_seconds: float  # wall time of the last full kernel run of every stretch
+    stretches: tuple[_StretchLaw, ...]  # what v, a, j are computed from when asked for
+    start_jerk_mm_s3: float  # j at the first point (at rest there: v = a = 0)
 
     @property
     def n_points(self) -> int:
         return self.u.size
+
+    # Time, arc, speed, acceleration and jerk at the points are for traces and analysis; a
+    # conversion writes points only, so they are computed on first use.
+    @cached_property
+    def t_s(self) -> np.ndarray:
+        return np.arange(self.n_points, dtype=float) * self.period_s
+
+    @cached_property
+    def s_mm(self) -> np.ndarray:
+        """The sum of the targets actually stepped."""
+        s = np.empty(self.n_points)
+        s[0] = 0.0
+        np.cumsum(self.ds_mm, out=s[1:])
+        return s
+
+    @property
+    def v_mm_s(self) -> np.ndarray:
+        return self._kinematics[0]
+
+    @property
+    def a_mm_s2(self) -> np.ndarray:
+        return self._kinematics[1]
+
+    @property
+    def j_mm_s3(self) -> np.ndarray:
+        return self._kinematics[2]
+
+    @cached_property
+    def _kinematics(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """v, a, j of the law at the points, scaled like the targets stepped (sigma, and the
+        stretch's scale), with the landing bump's own; at rest at every stretch start."""
+        v_all = np.zeros(self.n_points)
+        a_all = np.zeros(self.n_points)
+        j_all = np.zeros(self.n_points)
+        for st in self.stretches:
+            v, a, j = st.v[1:], st.a[1:], st.j[1:]
+            if st.bump is not None:  # the bump's own v, a, j at its points (see _Bump)
+                bump = slice(st.bump.k0, st.bump.k0 + st.bump.periods)
+                vw, aw, jw = st.bump.shape(st.t_plan[1:][bump])
+                v, a, j = v.copy(), a.copy(), j.copy()
+                v[bump] -= st.slowdown * vw
+                a[bump] -= st.slowdown * aw
+                j[bump] -= st.slowdown * jw
+            span = slice(st.k0 + 1, st.k0 + v.size + 1)
+            v_all[span] = st.sigma * v / st.scale
+            a_all[span] = st.sigma * a / st.scale**2
+            j_all[span] = st.sigma * j / st.scale**3
+        j_all[0] = self.start_jerk_mm_s3
+        for arr in (v_all, a_all, j_all):
+            arr.setflags(write=False)
+        return v_all, a_all, j_all
 
     def feed_fluctuation(self) -> np.ndarray:
         """SPEC §3 / Table 2: | |P_{k+1} - P_k| - ds_k | / ds_k for every full period: (N,)."""
@@ -296,6 +345,23 @@ class _Bump:
         w1 = math.pi / self.duration * np.sin(phase)
         w2 = 2.0 * (math.pi / self.duration) ** 2 * np.cos(phase)
         return self.v_mm_s * w, self.v_mm_s * w1, self.v_mm_s * w2
+
+
+@dataclass(frozen=True, eq=False)
+class _StretchLaw:
+    """The law over one stretch between rests as it was stepped: points k0 .. k0 + N of the
+    curve; the plan times, v, a, j (N+1,) from `_sample_stretch` (the bump not yet in them);
+    the stretch's time scale, its sigma, its landing bump and that bump's depth."""
+
+    k0: int
+    t_plan: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    j: np.ndarray
+    scale: float
+    sigma: float
+    bump: _Bump | None
+    slowdown: float
 
 
 @jit
@@ -480,12 +546,9 @@ def interpolate(plan: Plan, method: str = "rk2c") -> Interpolation:
     u_all = np.empty(n_all)
     points = np.empty((n_all, 3))
     ds_all = np.empty(n_all - 1)
-    v_all = np.zeros(n_all)
-    a_all = np.zeros(n_all)
-    j_all = np.zeros(n_all)
     u_all[0] = curve.u_min
     points[0] = curve.points[0]
-    sigmas, slowdowns = [], []
+    stretches: list[_StretchLaw] = []
     runs, seconds = 0.0, 0.0
     k0 = 0  # index of the stretch's first point
     for p in range(len(plan.piece_periods)):
@@ -513,31 +576,15 @@ def interpolate(plan: Plan, method: str = "rk2c") -> Interpolation:
         points[k0 + n] = end_point
         runs += landing.runs
         seconds += landing.seconds
-        scale = float(plan.piece_scale[p])
-        s = landing.sigma
         ds_all[k0:k0 + n] = landing.targets
-        v, a, j = v[1:], a[1:], j[1:]
-        if landing.bump is not None:  # the bump's own v, a, j at its points (see _Bump)
-            bump = slice(landing.bump.k0, landing.bump.k0 + landing.bump.periods)
-            vw, aw, jw = landing.bump.shape(t_plan[1:][bump])
-            e = landing.slowdown
-            v[bump] -= e * vw
-            a[bump] -= e * aw
-            j[bump] -= e * jw
-        v_all[k0 + 1:k0 + n + 1] = s * v / scale
-        a_all[k0 + 1:k0 + n + 1] = s * a / scale**2
-        j_all[k0 + 1:k0 + n + 1] = s * j / scale**3
-        sigmas.append(s)
-        slowdowns.append(landing.slowdown)
+        stretches.append(_StretchLaw(k0, t_plan, v, a, j, float(plan.piece_scale[p]),
+                                     landing.sigma, landing.bump, landing.slowdown))
         k0 += n
-    s_all = np.empty(n_all)
-    s_all[0] = 0.0
-    np.cumsum(ds_all, out=s_all[1:])
     # at rest at the start (and at every stretch start): v = a = 0, the jerk of the first piece
     first_j = float(law.jerk_mm_s3[0]) if law.jerk_mm_s3.size else 0.0
     first_scale = float(plan.piece_scale[0]) if plan.piece_scale.size else 1.0
-    first_sigma = sigmas[0] if sigmas else 1.0
-    j_all[0] = first_sigma * first_j / first_scale**3
-    return Interpolation(method, period, u_all, points, np.arange(n_all, dtype=float) * period,
-                         s_all, v_all, a_all, j_all, ds_all, np.array(sigmas),
-                         np.array(slowdowns), runs, seconds)
+    first_sigma = stretches[0].sigma if stretches else 1.0
+    return Interpolation(method, period, u_all, points, ds_all,
+                         np.array([st.sigma for st in stretches]),
+                         np.array([st.slowdown for st in stretches]), runs, seconds,
+                         tuple(stretches), first_sigma * first_j / first_scale**3)

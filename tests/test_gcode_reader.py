@@ -487,6 +487,7 @@ def without_fast_path(text: str, dialect: str) -> object:
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(NurbsCurveReader, "take_line", lambda self, line_text, line: False)
         patch.setattr(NurbsCurveReader, "take_run", lambda self, program, pos, line: (0, pos))
+        patch.setattr(NurbsCurveReader, "take_knot_line", lambda self, line_text, line: None)
         return outcome(text, dialect)
 
 
@@ -600,6 +601,22 @@ FAST_PATH_CASES = {
                                                        opening="")),
     "run, clamped end after it": points_curve(RUN, close="K9\nK9\nK10\nK10\n"),
     "run, too few knot-only blocks": points_curve(RUN, close="") + "K9\nK9\nG1 X0\n",
+    # knot-only lines: what take_knot_line reads, and the lines it leaves to the words
+    "knot-only, lower case and signs": points_curve(RUN, close="k+9.\n"),
+    "knot-only, bare point": points_curve(RUN[:4], close="K.5\n"),
+    "knot-only, crlf, no newline at the end": points_curve(RUN, close="K9\r\n")[:-2],
+    "knot-only, lone CR at the end": points_curve(RUN, close="K9\n")[:-1] + "\r",
+    "knot-only, comment": points_curve(RUN, close="K9 (end)\n"),
+    "knot-only, N word": points_curve(RUN, close="N10 K9\n"),
+    "knot-only, trailing space": points_curve(RUN, close="K9 \n"),
+    "knot-only, exponent": points_curve(RUN, close="K9e0\n"),
+    "knot-only, decreasing": points_curve(RUN, close="") + "K9\nK8\nK8\nK8\n",
+    "knot-only, below the last knot": points_curve(RUN, close="K1\n"),
+    "knot-only, too early": PREAMBLE + "G06.2 K0 X0 Y0 Z0\nK0 X1 Y1 Z0\nK1\nK1\nK1\nK1\n",
+    "knot-only, one too many": points_curve(RUN) + "K9\n",
+    "knot-only, then a point": points_curve(RUN, close="") + "K9\nK0.5 X1 Y1 Z1\n",
+    "knot-only, G6.2 with Q": ("G21 G90 G17\nG0 X0 Y0 Z0\nG6.2 P3 K0 X0 Y0 Q0\nK0 X1 Y1\n"
+                               "K0 X2 Y0\nK0.5 X3 Y1\nK1\nK1\nK1\nG1 X0\n"),
 }
 
 
@@ -617,6 +634,22 @@ def test_runs_read_the_point_lines_past_the_clamped_start() -> None:
     text = fanuc_program(3)
     assert lines_read_in_runs(text) == 3 * (50 - 4)  # all but each curve's first 4 lines
     assert with_fast_paths(text, "auto") == without_fast_path(text, "auto")
+
+
+def test_closing_knot_lines_are_read_from_their_text() -> None:
+    read_from_text = 0
+    take_knot_line = NurbsCurveReader.take_knot_line
+
+    def counting(self: NurbsCurveReader, line_text: str, line: int) -> bool | None:
+        nonlocal read_from_text
+        closed = take_knot_line(self, line_text, line)
+        read_from_text += closed is not None
+        return closed
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(NurbsCurveReader, "take_knot_line", counting)
+        read(fanuc_program(3))
+    assert read_from_text == 3 * 4  # every closing knot of the three curves
 
 
 def test_an_error_after_a_run_names_its_line_and_the_run_s_last_knot() -> None:

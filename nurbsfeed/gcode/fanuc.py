@@ -70,6 +70,7 @@ _POINT_LETTERS = frozenset("KXYZRF")
 # What CAM posts write for nearly every line of a curve (see NurbsCurveReader.take_line).
 _POINT_LINE = re.compile(rf"[Kk]({PLAIN_NUMBER}) [Xx]({PLAIN_NUMBER}) [Yy]({PLAIN_NUMBER}) "
                          rf"[Zz]({PLAIN_NUMBER})(?: [Rr]({PLAIN_NUMBER}))?\r?\n?")
+_KNOT_LINE = re.compile(rf"[Kk]({PLAIN_NUMBER})\r?\n?")  # ... and for the closing knots
 
 
 class NurbsCurveReader:
@@ -159,6 +160,16 @@ class NurbsCurveReader:
         self.points.append((x, y, z))
         self.weights.append(weight)
         return True
+
+    def take_knot_line(self, line_text: str, line: int) -> bool | None:
+        """`take` for a knot-only line "K_" (the closing knots), read straight from its text:
+        the same checks and errors, and what `take` returns (True once the curve is complete);
+        None, having read nothing, for any other line."""
+        match = _KNOT_LINE.fullmatch(line_text)
+        if match is None:
+            return None
+        text = match.group(1)
+        return self._closing_knot(Word("K", float(text), text, decimals_written(text), line, 1))
 
     def take_run(self, program: ProgramCodes, pos: int, line: int) -> tuple[int, int]:
         """`take_line` for the run of lines from text position `pos` (line number `line`) on,

@@ -2,7 +2,8 @@
 
 Call chain for one line: `tokenizer.tokenize_line` (for a plain "K_ X_ Y_ Z_ [R_]" line inside
 a G06.2 curve, `fanuc.NurbsCurveReader.take_line` reads the text directly instead, with the same
-result, and `take_run` reads a whole run of such lines at once in compiled code, point_lines.py)
+result, and `take_run` reads a whole run of such lines at once in compiled code, point_lines.py;
+`take_knot_line` reads a plain closing "K_" line the same way)
 -> if a NURBS block is open, its reader
 (`fanuc.NurbsCurveReader` or `linuxcnc.G52BlockReader`) takes the block, and the CurveBlock is
 yielded when the block completes; otherwise `_start` decides whether the block opens a NURBS
@@ -80,9 +81,16 @@ class _Reader:
             end = text.find("\n", pos) + 1 or len(text)  # only "\n" ends a line
             line_text = text[pos:end]
             pos = end
-            if isinstance(self.open, NurbsCurveReader) and self.open.take_line(line_text, line):
-                scan = True
-                continue  # a plain control point, read straight from the text
+            if isinstance(self.open, NurbsCurveReader):  # plain lines, read straight from text
+                if self.open.take_line(line_text, line):
+                    scan = True
+                    continue  # a control point
+                closed = self.open.take_knot_line(line_text, line)
+                if closed is not None:  # a closing knot
+                    if closed:
+                        yield self._curve_block(self.open.finish())
+                        self.open = None
+                    continue
             block = tokenize_line(line_text, line, self.path, self.params)
             if self.open is not None:
                 if self.open.take(block):

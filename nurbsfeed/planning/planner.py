@@ -109,10 +109,9 @@ class Plan:
 
 def feed_at(u: np.ndarray, feed_u: np.ndarray, feed_mm_s: np.ndarray) -> np.ndarray:
     """Programmed feed cap (step function of u) at each u: (M,) -> (M,); inf if none."""
-    if feed_u.size == 0:
-        return np.full(np.shape(u), np.inf)
-    i = np.searchsorted(feed_u, u, side="right") - 1
-    return np.where(i >= 0, feed_mm_s[np.clip(i, 0, None)], np.inf)
+    # the feed in force after the i-th break, inf before the first: index i + 1 of this table
+    table = np.concatenate(((np.inf,), feed_mm_s))
+    return table[np.searchsorted(feed_u, u, side="right")]
 
 
 @jit
