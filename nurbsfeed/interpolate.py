@@ -196,8 +196,6 @@ class Interpolation:
     u: np.ndarray
     points: np.ndarray  # C(u_k), full precision; first and last exactly the curve ends
     ds_mm: np.ndarray  # the targets actually stepped, (N,)
-    sigma: np.ndarray  # (P,) target scale of each stretch between rests
-    slowdown: np.ndarray  # (P,) relative depth e of each stretch's landing bump (0: none)
     landing_runs: float  # kernel runs over all stretches, a run from a bump on in its share
     step_seconds: float  # wall time of the last full kernel run of every stretch
     stretches: tuple[_StretchLaw, ...]  # what v, a, j are computed from when asked for
@@ -206,6 +204,16 @@ class Interpolation:
     @property
     def n_points(self) -> int:
         return self.u.size
+
+    @property
+    def sigma(self) -> np.ndarray:
+        """(P,) target scale of each stretch between rests."""
+        return np.array([st.sigma for st in self.stretches])
+
+    @property
+    def slowdown(self) -> np.ndarray:
+        """(P,) relative depth e of each stretch's landing bump (0: none)."""
+        return np.array([st.slowdown for st in self.stretches])
 
     # Time, arc, speed, acceleration and jerk at the points are for traces and analysis; a
     # conversion writes points only, so they are computed on first use.
@@ -584,7 +592,5 @@ def interpolate(plan: Plan, method: str = "rk2c") -> Interpolation:
     first_j = float(law.jerk_mm_s3[0]) if law.jerk_mm_s3.size else 0.0
     first_scale = float(plan.piece_scale[0]) if plan.piece_scale.size else 1.0
     first_sigma = stretches[0].sigma if stretches else 1.0
-    return Interpolation(method, period, u_all, points, ds_all,
-                         np.array([st.sigma for st in stretches]),
-                         np.array([st.slowdown for st in stretches]), runs, seconds,
-                         tuple(stretches), first_sigma * first_j / first_scale**3)
+    return Interpolation(method, period, u_all, points, ds_all, runs, seconds, tuple(stretches),
+                         first_sigma * first_j / first_scale**3)
