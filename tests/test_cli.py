@@ -248,25 +248,39 @@ def test_jit_and_plain_python_kernels_write_identical_programs(tmp_path: Path) -
 
 @pytest.mark.skipif(not JIT_ENABLED, reason="numba is not in use")
 def test_kernels_load_from_the_cache_without_numbas_compiler_registries(tmp_path: Path) -> None:
-    """nurbsfeed.jit's cache skips numba's registry refresh, which only compiling needs: a
-    conversion whose kernels all come from the cache (the second run) imports none of the
-    modules that refresh brings in, and writes the same program as the first run."""
+    """nurbsfeed.jit's cache skips numba's registry refresh, which only compiling needs, and
+    the import of the numba modules whose functions were inlined into the kernels: a conversion
+    whose kernels all come from the cache (the second run) imports neither, and writes the same
+    program as the first run. A function compiled afterwards in that process, calling a kernel
+    loaded from the cache, computes what the kernel's Python source does."""
     probe = ("import sys\n"
+             "import numpy as np\n"
              "from nurbsfeed.cli import main\n"
              "try:\n"
              "    main(['convert', %r, '-o', %r, '-q'])\n"
              "except SystemExit as exc:\n"
              "    assert not exc.code, exc.code\n"
-             "print('numba.np.polynomial.polynomial_core' in sys.modules)\n")
+             "print(sorted({'numba.np.polynomial.polynomial_core', 'numba.np.arrayobj',\n"
+             "              'numba.np.arraymath'} & set(sys.modules)))\n"
+             "import numba\n"
+             "from nurbsfeed.geometry.kernel import span_polynomials\n"
+             "from nurbsfeed.geometry.nurbs import NurbsCurve\n"
+             "c = NurbsCurve.build(2, [0, 0, 0, 0.4, 1, 1, 1], [[0, 0], [1, 2], [3, 1], [4, 0]],\n"
+             "                     [1, 2, 1, 1])\n"
+             "twice = numba.njit(lambda k, cw, p: 2.0 * span_polynomials(k, cw, p))\n"
+             "got = twice(c.knots, c.homogeneous, c.degree)\n"
+             "want = 2.0 * span_polynomials.py_func(c.knots, c.homogeneous, c.degree)\n"
+             "print(got.shape == want.shape and np.allclose(got, want, rtol=1e-14, atol=0))\n")
     outputs = []
     for name in ("first.nc", "second.nc"):
         out = tmp_path / name
         code = probe % (str(SAMPLES / "fanuc-quadratic.nc"), str(out))
         done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                               check=True)
-        outputs.append((done.stdout.strip(), out.read_bytes()))
-    assert outputs[1][0] == "False"  # the second run loaded everything from the cache
+        outputs.append((done.stdout.split("\n"), out.read_bytes()))
+    assert outputs[1][0][0] == "[]"  # the second run loaded everything from the cache
     assert outputs[0][1] == outputs[1][1]
+    assert outputs[0][0][1] == outputs[1][0][1] == "True"
 
 
 def test_taylor1_conversions_warn_that_they_can_break_the_limits(tmp_path: Path) -> None:
