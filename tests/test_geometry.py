@@ -172,9 +172,28 @@ def test_a_repeated_end_control_point_gives_c_prime_exactly_zero() -> None:
                   == curve.points[[0, -1]])
 
 
+def test_a_knot_where_curvature_jumps_carries_its_higher_side() -> None:
+    """A quadratic is only C1 at a simple knot: kappa jumps there, here from 2.33 on the left
+    to 0.72 on the right. The grid's node at the knot, and the curvature peak found there,
+    carry the left value (evaluated by the textbook oracle just before the knot): the limit
+    at the knot must not be taken from the flatter side."""
+    knots = [0, 0, 0, 0.5, 1, 1, 1]
+    points = [[8, 1], [2, 0], [1, 2], [0, 0]]
+    curve = NurbsCurve.build(2, knots, points)
+    left = naive_nurbs.curvature(*naive_nurbs.evaluate(2, knots, points, np.ones(4),
+                                                       0.5 - 1e-10)[1:])
+    right = naive_nurbs.curvature(*naive_nurbs.evaluate(2, knots, points, np.ones(4), 0.5)[1:])
+    assert left > 3 * right  # the jump this test is about
+    grid = build_grid(curve, 0.01, np.empty(0), 0.0)
+    node = int(np.searchsorted(grid.u, 0.5))
+    assert grid.u[node] == 0.5
+    assert grid.kappa_1_mm[node] == pytest.approx(left, rel=1e-8)
+    assert node in grid.peak_index
+
+
 @pytest.mark.parametrize("seed", range(8))
 def test_refined_curvature_peaks_are_the_maxima_around_them(seed: int) -> None:
-    """Zoom sampling then golden section: no curvature between the peak's neighbouring nodes,
+    """Sampling then Brent's method: no curvature between the peak's neighbouring nodes,
     sampled densely, is higher than the refined peak's (kappa_floor 0: every peak refined;
     the rounding noise of straight pieces, kappa ~ 1e-18, is no peak to check)."""
     curve = random_curve(np.random.default_rng(200 + seed))

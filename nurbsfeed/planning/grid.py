@@ -5,10 +5,12 @@ at most `spacing_mm` apart; refined curvature maxima are nodes too. The planner 
 profile at these nodes ("limits everywhere"), so the spacing is tied to the step length v_m T.
 
 Building it, in order (`_grid_nodes`, one compiled call; then `simpson_lengths`):
-1. Samples: per span, a node count from a 16-chord length estimate, evenly spaced in u.
+1. Samples: per span, a node count from a 16-chord length estimate, evenly spaced in u; at a
+   knot, the higher of kappa's two one-sided values.
 2. Curvature maxima: local maxima of kappa on the samples that stand out from their valleys,
-   each refined inside the bracket of its two neighbours (zoom sampling, then golden section;
-   only roughly where kappa stays well below kappa_floor, where the limit is flat).
+   each refined inside the bracket of its two neighbours (sampling, then Brent's method span by
+   span, with kappa from both sides at a knot; only roughly where kappa stays well below
+   kappa_floor, where the limit is flat).
 3. Corners: knots of multiplicity >= degree where the unit tangent jumps.
 4. The maxima, corners and caller's parameters are merged in as nodes; then every interval
    across which kappa jumps is halved, a few times over.
@@ -31,10 +33,15 @@ from nurbsfeed.jit import jit
 
 KAPPA_STEP_REL = 0.1  # refine where kappa changes by more than 10 % between nodes
 REFINE_ROUNDS = 6  # ... down to 1/64 of the base spacing
-ZOOM_SAMPLES = 11
-ZOOM_ROUNDS = 3  # the bracket (two grid steps) shrinks by 5^3 by zoom sampling ...
-PEAK_BRACKET_REL = 2e-9  # ... then to this by golden-section search
-GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
+ZOOM_SAMPLES = 11  # the bracket (two grid steps) shrinks by 5 by sampling ...
+# ... then to this by Brent's method: about the square root of the double's resolution, since
+# kappa is flat to second order at a smooth maximum (kappa is then within ~1e-16 of its peak
+# value); a closer bracket only chases the rounding of kappa.
+PEAK_BRACKET_REL = 1e-8
+BRENT_ITERATIONS = 100
+KNOT_PROBE_REL = 1e-6  # of the bracket: where kappa's slope beside a knot is probed
+GOLDEN_SMALL = (3.0 - math.sqrt(5.0)) / 2.0  # the golden section's smaller part, 0.382
+EPS_U = 3e-16  # Brent's relative resolution in u (a little above the double's)
 # Simpson's tolerance per node interval, relative to the interval's length at the mean |C'|.
 # The accepted values carry the Richardson term, so they are far more accurate than this:
 # on the butterfly and the benchmark curves every node's length is within 1e-10 mm of a
@@ -66,7 +73,9 @@ class Grid:
 def _samples(knots, coef, degree, breaks, spacing_mm):
     """Step 1: nodes evenly spaced in u per span, at most spacing_mm apart (the span's length
     estimated by CHORD_PROBES chords, plus 5 %), at least MIN_NODES_PER_SPAN; the last break
-    closes the list. Returns u, kappa, |C'| at the nodes: three (M,) arrays."""
+    closes the list. Returns u, kappa, |C'| at the nodes: three (M,) arrays. At an interior
+    knot kappa is the higher of its limits from the two sides (it jumps where the curve is
+    only C1), so that no node understates the curvature around it."""
     n_ctrl = coef.shape[0]
     n_spans = breaks.size - 1
     counts = np.empty(n_spans, dtype=np.int64)
@@ -95,9 +104,15 @@ def _samples(knots, coef, degree, breaks, spacing_mm):
     speed = np.empty(u_nodes.size)
     span = degree
     for q in range(u_nodes.size):
+        before = span
         span = find_span(knots, degree, n_ctrl, u_nodes[q], span)
         c = point_d2(knots, coef, degree, span, u_nodes[q])
         kappa[q], speed[q] = curvature(c[3], c[4], c[5], c[6], c[7], c[8])
+        if span != before and q > 0:  # a knot: kappa may jump there, take the higher side
+            c = point_d2(knots, coef, degree, before, u_nodes[q])
+            left, _ = curvature(c[3], c[4], c[5], c[6], c[7], c[8])
+            if left > kappa[q] or kappa[q] != kappa[q]:
+                kappa[q] = left
     return u_nodes, kappa, speed
 
 
@@ -148,74 +163,145 @@ def _prominent_maxima(kappa):
 
 
 @jit
+def _kappa_on_span(knots, coef, degree, span, u):
+    """kappa at u from span `span`'s polynomial (at a knot: its limit from that span's side);
+    -1 where C' = 0, so that such a point is never a maximum."""
+    c = point_d2(knots, coef, degree, span, u)
+    kappa, _ = curvature(c[3], c[4], c[5], c[6], c[7], c[8])
+    return kappa if kappa == kappa else -1.0
+
+
+@jit
+def _brent_max(knots, coef, degree, span, a, b, x, kappa_x, tol):
+    """Step 2c: the maximum of kappa on [a, b] from span `span`'s polynomial alone (u, kappa),
+    from x inside, whose kappa_x is above kappa at a and b, by Brent's method (parabolic
+    steps, golden-section steps where they do not shrink the bracket) to about tol in u.
+    Inside one span kappa is smooth, so the parabolic steps converge fast."""
+    fx = -kappa_x  # minimise -kappa
+    w, fw, v, fv = x, fx, x, fx
+    d = 0.0
+    e = 0.0
+    for _ in range(BRENT_ITERATIONS):
+        xm = 0.5 * (a + b)
+        tol1 = tol + EPS_U * abs(x)
+        tol2 = 2.0 * tol1
+        if abs(x - xm) <= tol2 - 0.5 * (b - a):
+            break
+        golden = True
+        if abs(e) > tol1:  # try a parabola through x, w, v
+            r = (x - w) * (fx - fv)
+            q = (x - v) * (fx - fw)
+            p = (x - v) * q - (x - w) * r
+            q = 2.0 * (q - r)
+            if q > 0.0:
+                p = -p
+            q = abs(q)
+            e_old = e
+            e = d
+            if abs(p) < abs(0.5 * q * e_old) and q * (a - x) < p < q * (b - x):
+                d = p / q
+                golden = False
+                if (x + d) - a < tol2 or b - (x + d) < tol2:
+                    d = tol1 if xm >= x else -tol1
+        if golden:
+            e = (a - x) if x >= xm else (b - x)
+            d = GOLDEN_SMALL * e
+        u = x + (d if abs(d) >= tol1 else (tol1 if d > 0.0 else -tol1))
+        c = point_d2(knots, coef, degree, span, u)  # _kappa_on_span, inline: ~10 % faster
+        kappa, _ = curvature(c[3], c[4], c[5], c[6], c[7], c[8])
+        fu = -kappa if kappa == kappa else 1.0
+        if fu <= fx:
+            if u >= x:
+                a = x
+            else:
+                b = x
+            v, fv, w, fw, x, fx = w, fw, x, fx, u, fu
+        else:
+            if u < x:
+                a = u
+            else:
+                b = u
+            if fu <= fw or w == x:
+                v, fv, w, fw = w, fw, u, fu
+            elif fu <= fv or v == x or v == w:
+                v, fv = u, fu
+    return x, -fx
+
+
+@jit
 def _refine_peak(knots, coef, degree, low, high, kappa_floor):
     """Step 2b: the maximum of kappa in [low, high] (u, kappa).
 
-    Zoom sampling first: ZOOM_SAMPLES points, keep the best and its neighbours as the next
-    bracket, ZOOM_ROUNDS times (the bracket shrinks by ZOOM_SAMPLES/2 per round). Unlike a
-    parabolic or Newton step it needs no smoothness, so a maximum on a knot (a kink in kappa) is
-    found as well as a smooth one, and of several maxima it keeps the highest. The bracket, now
-    holding one maximum, is then closed by golden-section search (smoothness-free as well) to
-    PEAK_BRACKET_REL of its first width. A peak still below half of kappa_floor after the zoom
-    is left there: below kappa_floor its position does not matter.
+    kappa is smooth inside a span; at a knot it may have a kink, or a jump where the curve is
+    only C1 there. First, ZOOM_SAMPLES evenly spaced samples, and every knot inside with the
+    higher of its two one-sided values: the best of them and its neighbouring samples bracket
+    the maximum (of several, the highest at that resolution). A peak below half of kappa_floor
+    stops there: below kappa_floor its position does not matter. Then the bracket is cut at
+    the knots inside it, which are candidates from both sides; a piece whose inside holds a
+    point above both its ends (the best sample, or a probe just inside a knot end where kappa
+    rises into the piece) is searched by `_brent_max` on its own span's polynomial, and on any
+    other piece the maximum is at an end.
     """
     n_ctrl = coef.shape[0]
     last = ZOOM_SAMPLES - 1
-    step = 1.0 / last
-    best_u = low
+    width = high - low
+    step = width / last
+    best_i = 0
     best_k = -1.0
     span = degree
-    target = (high - low) * PEAK_BRACKET_REL
-    for _ in range(ZOOM_ROUNDS):
-        best_i = 0
-        best_k = -1.0
-        width = high - low
-        for i in range(ZOOM_SAMPLES):
-            u = low + width * (i * step if i < last else 1.0)
-            span = find_span(knots, degree, n_ctrl, u, span)
-            c = point_d2(knots, coef, degree, span, u)
-            kappa, _ = curvature(c[3], c[4], c[5], c[6], c[7], c[8])
-            if kappa > best_k:  # the first maximum; NaN (C' = 0) never wins
-                best_k = kappa
-                best_i = i
-        best_u = low + width * (best_i * step if best_i < last else 1.0)
-        i_low = max(best_i - 1, 0)
-        i_high = min(best_i + 1, last)
-        low, high = (low + width * (i_low * step if i_low < last else 1.0),
-                     low + width * (i_high * step if i_high < last else 1.0))
+    for i in range(ZOOM_SAMPLES):
+        u = low + width * (i / last) if i < last else high
+        span = find_span(knots, degree, n_ctrl, u, span)
+        c = point_d2(knots, coef, degree, span, u)
+        kappa, _ = curvature(c[3], c[4], c[5], c[6], c[7], c[8])
+        if kappa > best_k:  # the first maximum; NaN (C' = 0) never wins
+            best_k = kappa
+            best_i = i
+    best_u = low + width * (best_i / last) if best_i < last else high
+    a = low + width * (max(best_i - 1, 0) / last)
+    b = low + width * ((best_i + 1) / last) if best_i + 1 < last else high
+    span = find_span(knots, degree, n_ctrl, low, degree)
+    while knots[span + 1] < high:  # the knots inside, from both sides
+        knot = knots[span + 1]
+        kappa = _kappa_on_span(knots, coef, degree, span, knot)
+        span = find_span(knots, degree, n_ctrl, knot, span)
+        kappa = max(kappa, _kappa_on_span(knots, coef, degree, span, knot))
+        if kappa > best_k:
+            best_u, best_k = knot, kappa
+            a, b = max(low, knot - step), min(high, knot + step)
     if best_k < 0.5 * kappa_floor:
         return best_u, best_k
-    # golden section: inner points x1 < x2 with kappa k1, k2; each round evaluates one new point
-    x1 = high - GOLDEN * (high - low)
-    x2 = low + GOLDEN * (high - low)
-    k1 = -1.0
-    k2 = -1.0
-    fresh = 0  # which inner point to evaluate next: 1 (x1), 2 (x2), 0 both at the start
+    tol = PEAK_BRACKET_REL * width
+    inside_u = best_u
+    inside_k = best_k
+    piece_low = a
+    span = find_span(knots, degree, n_ctrl, a, degree)
     while True:
-        for which in range(1, 3):
-            if fresh != 0 and fresh != which:
-                continue
-            u = x1 if which == 1 else x2
-            span = find_span(knots, degree, n_ctrl, u, span)
-            c = point_d2(knots, coef, degree, span, u)
-            kappa, _ = curvature(c[3], c[4], c[5], c[6], c[7], c[8])
-            kappa = kappa if kappa == kappa else -1.0
+        piece_high = min(b, knots[span + 1])
+        k_low = _kappa_on_span(knots, coef, degree, span, piece_low)
+        k_high = _kappa_on_span(knots, coef, degree, span, piece_high)
+        for u, kappa in ((piece_low, k_low), (piece_high, k_high)):
             if kappa > best_k:
                 best_u, best_k = u, kappa
-            if which == 1:
-                k1 = kappa
-            else:
-                k2 = kappa
-        if high - low <= target:
+        if piece_high - piece_low > 4.0 * tol:
+            start_u, start_k = piece_low, -1.0
+            if piece_low < inside_u < piece_high:
+                start_u, start_k = inside_u, inside_k
+            for end, into in ((piece_low, 1.0), (piece_high, -1.0)):
+                if a < end < b:  # a knot
+                    u = end + into * KNOT_PROBE_REL * width
+                    kappa = _kappa_on_span(knots, coef, degree, span, u)
+                    if kappa > start_k:
+                        start_u, start_k = u, kappa
+            if start_k > max(k_low, k_high):
+                u, kappa = _brent_max(knots, coef, degree, span, piece_low, piece_high,
+                                      start_u, start_k, tol)
+                if kappa > best_k:
+                    best_u, best_k = u, kappa
+        if piece_high >= b:
             return best_u, best_k
-        if k1 >= k2:  # the maximum is in [low, x2]
-            high, x2, k2 = x2, x1, k1
-            x1 = high - GOLDEN * (high - low)
-            fresh = 1
-        else:
-            low, x1, k1 = x1, x2, k2
-            x2 = low + GOLDEN * (high - low)
-            fresh = 2
+        piece_low = piece_high
+        span = find_span(knots, degree, n_ctrl, piece_low, span)
 
 
 @jit
