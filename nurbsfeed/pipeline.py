@@ -18,7 +18,7 @@ from typing import BinaryIO, Callable, Iterator
 import numpy as np
 
 from nurbsfeed.errors import InputError, Location
-from nurbsfeed.gcode.writer import MoveWriter, cycle_comment, hold_before_end
+from nurbsfeed.gcode.writer import MoveWriter, cycle_comment
 from nurbsfeed.interpolate import Interpolation, interpolate
 from nurbsfeed.json_reader import json_program
 from nurbsfeed.machine import Machine
@@ -130,7 +130,7 @@ def convert_block(block: CurveBlock, index: int, out: BinaryIO, machine: Machine
             out.write(b"G90" + eol)
         writer = MoveWriter(out, units_machine.decimals, units_machine.feed_decimals,
                             plan.limits.period_s, block.eol, interp.points[0])
-        writer.write(hold_before_end(interp.points, units_machine.decimals)[1:])
+        writer.write_curve(interp.points)
         moves = writer.moves
         if block.incremental:
             out.write(b"G91" + eol)

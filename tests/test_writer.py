@@ -9,7 +9,7 @@ import re
 import numpy as np
 import pytest
 
-from nurbsfeed.gcode.writer import MoveWriter, format_number, hold_before_end, round_ticks
+from nurbsfeed.gcode.writer import MoveWriter, end_run_start, format_number, round_ticks
 from tests.gcode_parse import moves
 
 
@@ -161,21 +161,54 @@ def test_moves_match_a_plain_reference_writer(seed, decimals, feed_decimals, per
 
 
 def test_the_move_onto_the_end_spans_every_period_up_to_the_end() -> None:
-    """The last points of a curve round onto its end: they are held before it, so the final
-    move lasts all their periods and the moves cover the whole planned time."""
+    """The last points of a curve round onto its end: they are held at the point before them,
+    so the final move lasts all their periods and the moves cover the whole planned time."""
     pts = slow_start_path(30000)
     ticks = round_ticks(pts, 4)
     same_as_end = np.all(ticks == ticks[-1], axis=1)
     assert same_as_end[-5:].all()  # the path really ends at rest, below the resolution
-    held = hold_before_end(pts, 4)
-    text, _ = write(held)
+    first_same = int(np.flatnonzero(~same_as_end)[-1]) + 1
+    assert end_run_start(pts, 4) == first_same
+    out = io.BytesIO()
+    MoveWriter(out, 4, 3, 0.001, "\n", pts[0]).write_curve(pts)
+    text = out.getvalue().decode("ascii")
     written, feeds, _ = moves(text, ticks[0] / 1e4)
     step = np.linalg.norm(np.diff(np.vstack([ticks[:1] / 1e4, written]), axis=0), axis=1)
     periods = np.round(step / (feeds / 60.0) / 0.001)
     assert periods.sum() == len(pts) - 1
     assert np.array_equal(written[-1], ticks[-1] / 1e4)
-    # only the trailing run changes, and only to the point before it
-    first_same = int(np.flatnonzero(~same_as_end)[-1]) + 1
-    assert np.array_equal(held[:first_same], pts[:first_same])
-    assert np.all(held[first_same:-1] == pts[first_same - 1]) and np.array_equal(held[-1],
-                                                                               pts[-1])
+    # the same text as the points with the trailing run replaced by the point before it
+    held = pts.copy()
+    held[first_same:-1] = pts[first_same - 1]
+    assert text == write(held)[0]
+    assert write(pts)[0] != text  # written as they are, the run would arrive early
+
+
+def test_a_short_curve_holds_its_end_run_too() -> None:
+    """Fewer points than the writer first looks at (16): the run onto the end is still found
+    (here points 6 and 7 round onto the end), so the last move spans its three periods."""
+    pts = np.array([[0.0, 0.0], [0.6, 0.3], [4.7, 2.2], [15.2, 5.7], [30.0, 7.5], [44.8, 5.7],
+                    [55.3, 2.2], [59.4, 0.3], [60.0, 0.0]]) * 1e-5  # a 0.6 um curve, at rest
+    pts = np.column_stack([pts, np.zeros(9)])
+    ticks = round_ticks(pts, 4)
+    assert np.array_equal(ticks[5:], [[4, 1, 0], [6, 0, 0], [6, 0, 0], [6, 0, 0]])
+    assert end_run_start(pts, 4) == 6
+    out = io.BytesIO()
+    MoveWriter(out, 4, 3, 0.001, "\n", pts[0]).write_curve(pts)
+    written, feeds, _ = moves(out.getvalue().decode("ascii"), ticks[0] / 1e4)
+    step = np.linalg.norm(np.diff(np.vstack([ticks[:1] / 1e4, written]), axis=0), axis=1)
+    periods = np.round(step / (feeds / 60.0) / 0.001)
+    assert periods.sum() == len(pts) - 1 and periods[-1] == 3
+
+
+def test_a_curve_with_no_point_rounding_onto_its_end_is_written_as_it_is() -> None:
+    pts = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.5, 0.0], [3.0, 1.0, 0.0]])
+    assert end_run_start(pts, 4) == len(pts) - 1
+    out = io.BytesIO()
+    MoveWriter(out, 4, 3, 0.001, "\n", pts[0]).write_curve(pts)
+    assert out.getvalue().decode("ascii") == write(pts)[0]
+    # all of them round onto the end: nothing is held, nothing moves
+    still = np.full((5, 3), 1.00001)
+    assert end_run_start(still, 4) == len(still) - 1
+
+

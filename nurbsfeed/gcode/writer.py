@@ -227,17 +227,11 @@ def round_ticks(points: np.ndarray, decimals: int) -> np.ndarray:
     return out
 
 
-def hold_before_end(points: np.ndarray, decimals: int) -> np.ndarray:
-    """points (N, 3), ending at the curve end, with the trailing points that round onto the end
-    replaced by the point before them.
-
-    Those points are not written (they equal the end as written), and a dropped point's period
-    goes to the next move; at the end there is none, so the machine would arrive early. Held at
-    the point before them instead, they make the one move onto the end span all their periods:
-    it arrives when the plan does. Only the last few points are looked at.
-    """
+def end_run_start(points: np.ndarray, decimals: int) -> int:
+    """Index of the first of the trailing points of points (N, 3) that round onto the last one
+    (N - 1 if none before it does, or if all of them do). Only the last few are looked at."""
     end = round_ticks(points[-1:], decimals)[0]
-    look = 16
+    look = min(16, len(points))
     while True:
         tail = round_ticks(points[-look:], decimals)
         differ = np.flatnonzero(np.any(tail != end, axis=1))
@@ -245,13 +239,8 @@ def hold_before_end(points: np.ndarray, decimals: int) -> np.ndarray:
             break
         look = min(4 * look, len(points))
     if differ.size == 0:
-        return points
-    first_same = len(points) - look + int(differ[-1]) + 1  # first of the run equal to the end
-    if first_same >= len(points) - 1:
-        return points
-    held = points.copy()
-    held[first_same:-1] = points[first_same - 1]
-    return held
+        return len(points) - 1
+    return len(points) - look + int(differ[-1]) + 1
 
 
 def _check_decimals(decimals: int) -> None:
@@ -281,6 +270,19 @@ class MoveWriter:
     @property
     def moves(self) -> int:
         return int(self.state[_MOVES])
+
+    def write_curve(self, points: np.ndarray) -> None:
+        """The curve's points (N, 3) after its first one (`start`), ending at the curve end.
+
+        The trailing points that round onto the end are not written (they equal the end as
+        written), and a dropped point's period goes to the next move; at the end there is
+        none, so the machine would arrive early. Held at the point before them instead, they
+        make the one move onto the end span all their periods: it arrives when the plan does.
+        """
+        first_same = end_run_start(points, self.decimals)
+        self.write(points[1:first_same])
+        self.state[_PENDING] += len(points) - 1 - first_same  # held where the point before is
+        self.write(points[-1:])
 
     def write(self, points: np.ndarray) -> None:
         """Points (N, 3) that follow the previous ones, one period apart."""
