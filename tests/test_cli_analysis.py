@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -70,6 +71,23 @@ def test_check_passes_a_correct_conversion(butterfly_nc: Path) -> None:
     assert "source lines, curves, number format, curve ends, G90/G91 and F restore: ok" in lines
     assert "divided differences of the projected arc length over 2 ms, 9 ms" in stdout
     assert lines[-1] == "result: OK: 0 violation(s)"
+
+
+def test_a_curve_of_a_few_periods_converts_and_checks(tmp_path: Path) -> None:
+    """A 0.6 um curve, 8 periods: its last points round onto the end and are held before it
+    (the moves cover every announced period), and the checker, with too few moves for its
+    jerk estimate, reports that row as empty instead of failing."""
+    source = tmp_path / "tiny.nc"
+    source.write_text("G21 G90\nG0 X0. Y0. Z0.\nG06.2 P4 K0. X0. Y0. Z0. F6000.\n"
+                      "K0. X0.0002 Y0.0001\nK0. X0.0004 Y0.0001\nK0. X0.0006 Y0.\n"
+                      "K1.\nK1.\nK1.\nK1.\nM30\n")
+    out = tmp_path / "tiny.out.nc"
+    assert run("convert", str(source), "-o", str(out), "-q")[0] == 0
+    code, stdout, stderr = run("check", str(source), str(out))
+    assert code == 0 and stderr == ""
+    assert "announced periods" not in stdout
+    assert re.search(r"^tangential jerk +mm/s\^3 +- +- +- +- +0 +0$", stdout, re.M)
+    assert stdout.rstrip().endswith("result: OK: 0 violation(s)")
 
 
 def test_check_exits_1_and_names_the_violation(butterfly_nc: Path, tmp_path: Path) -> None:

@@ -683,7 +683,7 @@ def _reduce(name: str, parts: list[tuple[np.ndarray, ...]],
             output: str) -> tuple[Measure, list[Violation]]:
     """One check's arrays over all curves -> its Measure and its first violations."""
     title, unit, template = CHECKS[name]
-    if not parts:
+    if not any(p[0].size for p in parts):  # no curve long enough for this estimate
         return Measure(name, title, unit, 0, 0, 0.0, 0.0, 0.0, "-"), []
     value, limit, allowance, line = (np.concatenate([p[q] for p in parts]) for q in range(4))
     total = limit + allowance
