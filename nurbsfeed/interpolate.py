@@ -416,18 +416,17 @@ class _Landing:
 
 
 def _land(curve, code: int, u_start: float, u_end: float, end_point: np.ndarray,
-          ds: np.ndarray, slow: float, sigma: float, bump: _Bump | None, t_plan: np.ndarray,
-          u: np.ndarray, pts: np.ndarray) -> _Landing:
-    """Step from u_start through ds (N,) into u (N+1,) and pts (N+1, 3), landing exactly on
-    end_point (see the module docstring): first with targets sigma * ds, then with a bump or
-    another sigma.
+          ds: np.ndarray, total: float, slow: float, sigma: float, bump: _Bump | None,
+          t_plan: np.ndarray, u: np.ndarray, pts: np.ndarray) -> _Landing:
+    """Step from u_start through ds (N,), whose sum is total, into u (N+1,) and pts (N+1, 3),
+    landing exactly on end_point (see the module docstring): first with targets sigma * ds,
+    then with a bump or another sigma.
 
     The kernel makes the first N-1 steps; the last point is end_point itself, and the residual
     |end - P_{N-1}| - (last target) is driven to zero. It is continuous and monotone in sigma
     and e even where C' vanishes at the end (the curve folds back there when extrapolated).
     """
     n = ds.size
-    total = float(ds.sum())
     knots, coef, degree = curve.knots, curve.span_polynomials, curve.degree
     n_spans = int(np.searchsorted(knots, u_end, side="left"))  # last span ends at u_end
     # Each step rounds the point to ~eps (length + coordinates), and those errors add up like a
@@ -576,7 +575,7 @@ def interpolate(plan: Plan, method: str = "rk2c") -> Interpolation:
         end_point = curve.points[-1] if last else curve.point(key_u[key_b])
         start_point = points[k0].copy()  # the previous landing (or the curve start): exact
         landing = _land(curve, code, float(key_u[key_a]), float(key_u[key_b]),
-                        np.asarray(end_point, dtype=float), ds, slow, sigma,
+                        np.asarray(end_point, dtype=float), ds, total, slow, sigma,
                         _bump_window(law, t_plan), t_plan, u_all[k0:k0 + n + 1],
                         points[k0:k0 + n + 1])
         points[k0] = start_point

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -79,7 +80,7 @@ class Plan:
     piece_scale: np.ndarray  # (P,) lambda >= 1 of each stretch
     fix_rounds: int
 
-    @property
+    @cached_property
     def n_periods(self) -> int:
         return int(self.piece_periods.sum())
 
@@ -110,6 +111,8 @@ class Plan:
 def feed_at(u: np.ndarray, feed_u: np.ndarray, feed_mm_s: np.ndarray) -> np.ndarray:
     """Programmed feed cap (step function of u) at each u: (M,) -> (M,); inf if none."""
     # the feed in force after the i-th break, inf before the first: index i + 1 of this table
+    if feed_u.size == 1 and feed_u[0] <= u[0]:  # one feed over the whole curve
+        return np.full(u.size, feed_mm_s[0])
     table = np.concatenate(((np.inf,), feed_mm_s))
     return table[np.searchsorted(feed_u, u, side="right")]
 
