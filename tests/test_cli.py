@@ -248,11 +248,12 @@ def test_jit_and_plain_python_kernels_write_identical_programs(tmp_path: Path) -
 
 @pytest.mark.skipif(not JIT_ENABLED, reason="numba is not in use")
 def test_kernels_load_from_the_cache_without_numbas_compiler_registries(tmp_path: Path) -> None:
-    """nurbsfeed.jit's cache skips numba's registry refresh, which only compiling needs, and
-    the import of the numba modules whose functions were inlined into the kernels: a conversion
-    whose kernels all come from the cache (the second run) imports neither, and writes the same
-    program as the first run. A function compiled afterwards in that process, calling a kernel
-    loaded from the cache, computes what the kernel's Python source does."""
+    """nurbsfeed.jit's cache skips numba's registry refresh, which only compiling needs, the
+    import of the numba modules whose functions were inlined into the kernels, and the parsing
+    of the kernels' IR: a conversion whose kernels all come from the cache (the second run)
+    imports none of those modules, leaves the IR unparsed, and writes the same program as the
+    first run. A function compiled afterwards in that process, calling a kernel loaded from the
+    cache (which needs that IR), computes what the kernel's Python source does."""
     probe = ("import sys\n"
              "import numpy as np\n"
              "from nurbsfeed.cli import main\n"
@@ -265,12 +266,15 @@ def test_kernels_load_from_the_cache_without_numbas_compiler_registries(tmp_path
              "import numba\n"
              "from nurbsfeed.geometry.kernel import span_polynomials\n"
              "from nurbsfeed.geometry.nurbs import NurbsCurve\n"
+             "libs = [r.library for r in span_polynomials.overloads.values()]\n"
+             "print([(type(lib).__name__, lib._shared_bitcode is None) for lib in libs])\n"
              "c = NurbsCurve.build(2, [0, 0, 0, 0.4, 1, 1, 1], [[0, 0], [1, 2], [3, 1], [4, 0]],\n"
              "                     [1, 2, 1, 1])\n"
              "twice = numba.njit(lambda k, cw, p: 2.0 * span_polynomials(k, cw, p))\n"
              "got = twice(c.knots, c.homogeneous, c.degree)\n"
              "want = 2.0 * span_polynomials.py_func(c.knots, c.homogeneous, c.degree)\n"
-             "print(got.shape == want.shape and np.allclose(got, want, rtol=1e-14, atol=0))\n")
+             "print(got.shape == want.shape and np.allclose(got, want, rtol=1e-14, atol=0))\n"
+             "print([(type(lib).__name__, lib._shared_bitcode is None) for lib in libs])\n")
     outputs = []
     for name in ("first.nc", "second.nc"):
         out = tmp_path / name
@@ -280,7 +284,10 @@ def test_kernels_load_from_the_cache_without_numbas_compiler_registries(tmp_path
         outputs.append((done.stdout.split("\n"), out.read_bytes()))
     assert outputs[1][0][0] == "[]"  # the second run loaded everything from the cache
     assert outputs[0][1] == outputs[1][1]
-    assert outputs[0][0][1] == outputs[1][0][1] == "True"
+    # loaded with its IR unparsed; parsed once the new function links the kernel in
+    assert outputs[1][0][1] == "[('LoadedLibrary', False)]"
+    assert outputs[0][0][2] == outputs[1][0][2] == "True"
+    assert outputs[1][0][3] == "[('LoadedLibrary', True)]"
 
 
 def test_taylor1_conversions_warn_that_they_can_break_the_limits(tmp_path: Path) -> None:
