@@ -210,5 +210,9 @@ def test_a_curve_with_no_point_rounding_onto_its_end_is_written_as_it_is() -> No
     # all of them round onto the end: nothing is held, nothing moves
     still = np.full((5, 3), 1.00001)
     assert end_run_start(still, 4) == len(still) - 1
+    out = io.BytesIO()
+    writer = MoveWriter(out, 4, 3, 0.001, "\n", still[0])
+    writer.write_curve(still)
+    assert out.getvalue() == b"" and writer.moves == 0
 
 
