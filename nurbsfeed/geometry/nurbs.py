@@ -167,7 +167,7 @@ def check_knots(k: np.ndarray, degree: int, n_ctrl: int) -> None:
         i = int(np.flatnonzero(k[1:] < k[:-1])[0]) + 1
         raise CurveError(f"knots must not decrease: knot {i} ({k[i]:g}) < knot {i - 1} "
                          f"({k[i - 1]:g})")
-    if (k[:order] != k[0]).any() or (k[-order:] != k[-1]).any():
+    if k[order - 1] != k[0] or k[-order] != k[-1]:  # (non-decreasing: the ends' runs equal)
         raise CurveError(f"knot vector must be clamped: the first {order} and the last {order} "
                          f"knots must be equal (order {order})")
     if k[-1] <= k[0]:
