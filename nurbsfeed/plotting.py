@@ -23,7 +23,7 @@ from nurbsfeed.pipeline import atomic_output
 from nurbsfeed.planning.planner import KIND_NAMES, Plan
 
 LIMIT_STYLE = {"color": "tab:red", "linestyle": "--", "linewidth": 1.2}
-KIND_MARKERS = {"end": ("s", "black"), "peak": ("^", "tab:red"), "corner": ("X", "black"),
+KIND_MARKERS = {"end": ("s", "black"), "peak": ("^", "tab:red"), "corner": ("X", "black"), "cusp": ("P", "black"),
                 "feed": ("D", "tab:blue"), "hold": ("o", "tab:orange")}
 DPI = 110
 LEGEND_HEADROOM = 1.3  # the y axis reaches this far above the limit: the legend sits there

@@ -170,7 +170,7 @@ def test_sharp_corner_is_passed_at_rest(paper_limits) -> None:
     curve = NurbsCurve.build(2, [0, 0, 0, 0.5, 0.5, 1, 1, 1],
                              [[0, 0], [10, 0], [20, 0], [20, 10], [20, 20]])
     plan = plan_curve(curve, paper_limits)
-    corner = plan.grid.corner_index
+    corner = plan.grid.stop_index
     assert corner.size == 1 and plan.grid.u[corner[0]] == 0.5
     law_v = plan.law.speed_at_arc(plan.grid.s_mm[corner])
     assert law_v[0] == pytest.approx(0.0, abs=1e-9)

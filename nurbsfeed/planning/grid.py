@@ -11,7 +11,17 @@ Building it, in order (`_grid_nodes`, one compiled call; then `simpson_lengths`)
    each refined inside the bracket of its two neighbours (sampling, then Brent's method span by
    span, with kappa from both sides at a knot; only roughly where kappa stays well below
    kappa_floor, where the limit is flat).
-3. Corners: knots of multiplicity >= degree where the unit tangent jumps.
+3. Stops, where the feed must come to rest (kappa is infinite there):
+   a. corners at knots of multiplicity >= degree, where the unit tangent jumps (`_corners`);
+   b. zeros of C' (a control point repeated, a cusp, a path that turns back on itself), found
+      as local minima of |C'| on the samples refined by Gauss-Newton, and at every knot from
+      both sides (`_stops`). A zero is classified by the one-sided tangents, taken as chords from it:
+        - they differ (a corner) or are opposite (a cusp, a reversal): a stop;
+        - they agree, but kappa grows without bound towards the zero: a stop (v^2 kappa would
+          be unbounded at any speed above 0);
+        - they agree and kappa has finite one-sided limits: removable, the curve is smooth
+          there; its kappa is the limit (the next finite value, `_fill_singular`).
+      The ends of the curve are at rest anyway; a zero of C' there only blanks kappa.
 4. The maxima, corners and caller's parameters are merged in as nodes; then every interval
    across which kappa jumps is halved, a few times over.
 5. Arc length by adaptive Simpson between consecutive nodes (geometry.arclength).
@@ -52,6 +62,14 @@ CHORD_PROBES = 16  # chords per span for the node count
 PEAK_PROMINENCE_REL = 1e-7
 CORNER_COS_TOL = 1e-8  # a tangent turning by more than ~1.4e-4 rad at a knot is a corner
 CORNER_PROBE_REL = 1e-9  # of the parameter range: how far beside the knot the tangents are taken
+# |C'| at or below this fraction of the mean |C'| is zero: the curve stops there (step 3). A true
+# zero of a polynomial C' refines to ~1e-12 of the mean or below; one that does not is a near
+# cusp whose curvature the limits already handle.
+ZERO_SPEED_REL = 1e-7
+ZERO_ITERATIONS = 60  # Gauss-Newton steps towards a minimum of |C'|^2 (linear at a double zero)
+TANGENT_PROBE_REL = 1e-4  # of the span's width: where the chords beside a zero end ...
+TANGENT_CHORD_REL = 1e-9  # ... grown tenfold until they are this long (of the polygon's length)
+KAPPA_BOUNDED_REL = 0.25  # kappa beside a zero changing by more than this over 16x: unbounded
 
 
 @dataclass(frozen=True, eq=False)
@@ -62,11 +80,23 @@ class Grid:
     s_mm: np.ndarray  # cumulative arc length, s[0] = 0
     kappa_1_mm: np.ndarray  # curvature; at a point where C' = 0, the limit from inside
     peak_index: np.ndarray  # (P,) nodes that are local curvature maxima (refined, see step 2)
-    corner_index: np.ndarray  # (Q,) nodes where the tangent jumps (C0 knots): speed 0
+    stop_index: np.ndarray  # (Q,) nodes where the motion rests: corners, cusps, reversals (step 3)
+    stop_cos: np.ndarray  # (Q,) cosine of the tangent's turn at each stop (-1: turns back)
 
     @property
     def length_mm(self) -> float:
         return float(self.s_mm[-1])
+
+
+@jit
+def polygon_length(points):
+    """Length of the control polygon (N, 3): the curve is no longer."""
+    total = 0.0
+    for i in range(points.shape[0] - 1):
+        total += math.sqrt((points[i + 1, 0] - points[i, 0]) ** 2
+                           + (points[i + 1, 1] - points[i, 1]) ** 2
+                           + (points[i + 1, 2] - points[i, 2]) ** 2)
+    return total
 
 
 @jit
@@ -305,8 +335,9 @@ def _refine_peak(knots, coef, degree, low, high, kappa_floor):
 
 
 @jit
-def _corners(knots, coef, degree, breaks):
-    """Step 3: interior knots of multiplicity >= degree where the unit tangent jumps."""
+def _corners(knots, coef, degree, breaks, floor_mm):
+    """Step 3a: interior knots of multiplicity >= degree where the unit tangent jumps (not
+    where the curve has no length on one side: that is an end)."""
     n_ctrl = coef.shape[0]
     eps = CORNER_PROBE_REL * (breaks[breaks.size - 1] - breaks[0])
     out = np.empty(max(breaks.size - 2, 0))
@@ -317,6 +348,12 @@ def _corners(knots, coef, degree, breaks):
         for k in knots:
             mult += k == knot
         if mult < degree:
+            continue
+        _, _, _, h_before = _chord_from(knots, coef, degree, knot, -1.0,
+                                        knot - breaks[b - 1], breaks[0], floor_mm)
+        _, _, _, h_after = _chord_from(knots, coef, degree, knot, 1.0,
+                                       breaks[b + 1] - knot, breaks[breaks.size - 1], floor_mm)
+        if h_before == 0.0 or h_after == 0.0:
             continue
         span = find_span(knots, degree, n_ctrl, knot - eps, degree)
         _, _, _, lx, ly, lz = point_d1(knots, coef, degree, span, knot - eps)
@@ -332,9 +369,173 @@ def _corners(knots, coef, degree, breaks):
 
 
 @jit
-def _merge(knots, coef, degree, u, kappa, speed, extra):
+def _speed_on_span(knots, coef, degree, span, u):
+    """|C'(u)| from span `span`'s polynomial (at a knot: its limit from that span's side)."""
+    _, _, _, dx, dy, dz = point_d1(knots, coef, degree, span, u)
+    return math.sqrt(dx * dx + dy * dy + dz * dz)
+
+
+@jit
+def _kappa_or_nan(knots, coef, degree, u, zero_speed):
+    """kappa at u; NaN where |C'| <= zero_speed (there it is rounding noise over ~0)."""
+    span = find_span(knots, degree, coef.shape[0], u, degree)
+    c = point_d2(knots, coef, degree, span, u)
+    kappa, speed = curvature(c[3], c[4], c[5], c[6], c[7], c[8])
+    return kappa if speed > zero_speed else math.nan
+
+
+@jit
+def _refine_zero(knots, coef, degree, u, low, high):
+    """Step 3a: Gauss-Newton towards a minimum of |C'|^2 in [low, high] from u, (u, |C'(u)|).
+
+    The step is the zero of C' linearised at u, -(C'.C'') / |C''|^2, kept inside the bracket:
+    quadratic convergence at a simple zero of C' (a cusp, a reversal), linear (halving) at a
+    double one, and at a minimum that is not a zero it stops where |C'| is smallest."""
+    n_ctrl = coef.shape[0]
+    span = find_span(knots, degree, n_ctrl, u, degree)
+    for _ in range(ZERO_ITERATIONS):
+        span = find_span(knots, degree, n_ctrl, u, span)
+        c = point_d2(knots, coef, degree, span, u)
+        grad = c[3] * c[6] + c[4] * c[7] + c[5] * c[8]
+        curv = c[6] * c[6] + c[7] * c[7] + c[8] * c[8]
+        if curv == 0.0:
+            break
+        nxt = min(max(u - grad / curv, low), high)
+        if nxt == u:
+            break
+        u = nxt
+    span = find_span(knots, degree, n_ctrl, u, span)
+    return u, _speed_on_span(knots, coef, degree, span, u)
+
+
+@jit
+def _chord_from(knots, coef, degree, u0, side, width, u_limit, floor_mm):
+    """Step 3b: the unit chord between C(u0) and C(u0 + side h), in the direction of travel,
+    with h = TANGENT_PROBE_REL * width grown tenfold until the chord is at least floor_mm long
+    (never past u_limit). At a zero of C' this is the one-sided tangent: the curve leaves the
+    point along it. Returns the unit vector and h; h = 0 if no chord is long enough."""
+    n_ctrl = coef.shape[0]
+    span = find_span(knots, degree, n_ctrl, u0, degree)
+    px, py, pz, _, _, _ = point_d1(knots, coef, degree, span, u0)
+    h = TANGENT_PROBE_REL * width
+    while True:
+        u = u0 + side * h
+        if side * (u - u_limit) > 0.0:
+            u = u_limit
+        span = find_span(knots, degree, n_ctrl, u, span)
+        qx, qy, qz, _, _, _ = point_d1(knots, coef, degree, span, u)
+        dx = side * (qx - px)
+        dy = side * (qy - py)
+        dz = side * (qz - pz)
+        length = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if length >= floor_mm:
+            return dx / length, dy / length, dz / length, abs(u - u0)
+        if u == u_limit:
+            return 0.0, 0.0, 0.0, 0.0
+        h *= 10.0
+
+
+@jit
+def _zero_is_smooth(knots, coef, degree, u0, width_before, width_after, floor_mm, kappa_floor):
+    """Step 3c: whether the curve passes a zero of C' at u0 smoothly (the zero is removable),
+    and the cosine of the turn there (1: none, -1: the path turns back on itself). A zero with
+    no length on one side (the curve's first or last span(s) have none) is an end, not a stop.
+
+    Smooth means: the one-sided tangents (`_chord_from`) agree to CORNER_COS_TOL, and kappa
+    has finite one-sided limits: kappa at h and 16 h beside u0 on each side differs by at most
+    KAPPA_BOUNDED_REL (or stays below kappa_floor, where it does not limit the feed). Near a
+    repeated control point kappa often grows like s^-1/2 towards the zero: v^2 kappa would be
+    unbounded at any speed but 0, so such a zero is a stop however straight the path looks.
+    """
+    u_min = knots[degree]
+    u_max = knots[knots.size - degree - 1]
+    bx, by, bz, h_before = _chord_from(knots, coef, degree, u0, -1.0, width_before, u_min,
+                                       floor_mm)
+    ax, ay, az, h_after = _chord_from(knots, coef, degree, u0, 1.0, width_after, u_max,
+                                      floor_mm)
+    if h_before == 0.0 or h_after == 0.0:  # no length on one side: an end of the curve
+        return True, 1.0
+    cos = bx * ax + by * ay + bz * az
+    if cos < 1.0 - CORNER_COS_TOL:
+        return False, cos
+    zero_speed = 0.0
+    for side, h in ((-1.0, h_before), (1.0, h_after)):
+        near = _kappa_or_nan(knots, coef, degree, u0 + side * h, zero_speed)
+        far_u = min(max(u0 + side * 16.0 * h, u_min), u_max)
+        far = _kappa_or_nan(knots, coef, degree, far_u, zero_speed)
+        if not (math.isfinite(near) and math.isfinite(far)):
+            return False, cos
+        high = max(near, far)
+        if high > kappa_floor and abs(near - far) > KAPPA_BOUNDED_REL * high:
+            return False, cos
+    return True, cos
+
+
+@jit
+def _stops(knots, coef, degree, breaks, u, speed, zero_speed, floor_mm, kappa_floor):
+    """Step 3: the interior points where C' vanishes and the motion must come to rest.
+
+    Candidates are the samples where |C'| has a local minimum (refined by `_refine_zero`
+    inside the bracket of their neighbours) and every interior knot, where |C'| is taken from
+    both sides (a repeated control point makes it vanish on one side only). A candidate whose
+    |C'| is at most zero_speed is a zero of C'; each is classified by `_zero_is_smooth`: a
+    corner (the tangent jumps), a cusp or a reversal (it turns back), or a zero beside which
+    kappa is unbounded is a stop (u, and the cosine of the turn); a removable zero is not (its
+    kappa is the one-sided limit, see `_fill_singular`). Returns (Q,) parameters and cosines.
+    """
+    n_ctrl = coef.shape[0]
+    last = u.size - 1
+    found = np.empty(u.size + breaks.size)
+    n = 0
+    for q in range(1, last):
+        if speed[q] > speed[q - 1] or speed[q] > speed[q + 1]:
+            continue
+        if speed[q] <= zero_speed:
+            if speed[q - 1] > zero_speed:  # the first sample of a run at rest
+                found[n] = u[q]
+                n += 1
+            continue
+        at, at_speed = _refine_zero(knots, coef, degree, u[q], u[q - 1], u[q + 1])
+        if at_speed <= zero_speed:
+            found[n] = at
+            n += 1
+    span = degree
+    for b in range(1, breaks.size - 1):
+        knot = breaks[b]
+        span = find_span(knots, degree, n_ctrl, knot, span)  # the span starting at the knot
+        before = find_span(knots, degree, n_ctrl, breaks[b - 1], span - 1)
+        if (_speed_on_span(knots, coef, degree, before, knot) <= zero_speed
+                or _speed_on_span(knots, coef, degree, span, knot) <= zero_speed):
+            found[n] = knot
+            n += 1
+    zeros = np.sort(found[:n])
+    stop_u = np.empty(n)
+    stop_cos = np.empty(n)
+    m = 0
+    resolution = EPS_U * 16.0 * (breaks[breaks.size - 1] - breaks[0])
+    for i in range(n):
+        u0 = zeros[i]
+        if (i > 0 and u0 - zeros[i - 1] <= resolution) or u0 <= breaks[0] or (
+                u0 >= breaks[breaks.size - 1]):
+            continue
+        b = np.searchsorted(breaks, u0, side="right")  # breaks[b - 1] <= u0 < breaks[b]
+        width_after = breaks[b] - breaks[b - 1]
+        width_before = width_after
+        if u0 == breaks[b - 1] and b >= 2:  # on a knot: the span before it
+            width_before = breaks[b - 1] - breaks[b - 2]
+        smooth, cos = _zero_is_smooth(knots, coef, degree, u0, width_before, width_after,
+                                      floor_mm, kappa_floor)
+        if not smooth:
+            stop_u[m] = u0
+            stop_cos[m] = cos
+            m += 1
+    return stop_u[:m], stop_cos[:m]
+
+
+@jit
+def _merge(knots, coef, degree, u, kappa, speed, extra, zero_speed):
     """Step 4a: the sorted union of the nodes and the extra parameters, with kappa and |C'|
-    (a parameter that is already a node keeps the node's values)."""
+    (a parameter that is already a node keeps the node's values; kappa NaN where |C'| is 0)."""
     n_ctrl = coef.shape[0]
     extra = np.sort(extra)
     size = u.size + extra.size
@@ -362,18 +563,20 @@ def _merge(knots, coef, degree, u, kappa, speed, extra):
             span = find_span(knots, degree, n_ctrl, extra[j], span)
             c = point_d2(knots, coef, degree, span, extra[j])
             k_out[n], s_out[n] = curvature(c[3], c[4], c[5], c[6], c[7], c[8])
+            if s_out[n] <= zero_speed:
+                k_out[n] = math.nan
             j += 1
         n += 1
     return u_out[:n], k_out[:n], s_out[:n]
 
 
 @jit
-def _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed, kappa_floor):
+def _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed, kappa_floor, zero_speed):
     """Step 4b: halve every interval across which kappa (above kappa_floor) changes by more than
     KAPPA_STEP_REL, up to REFINE_ROUNDS times. The planner bounds the limit between two nodes by
     the lower of their limits; near a sharp curvature peak that bound is only tight when the
-    nodes are close, so the grid is made dense exactly there. A midpoint where C' = 0 takes the
-    kappa of the interval's start."""
+    nodes are close, so the grid is made dense exactly there. A midpoint where C' = 0 (|C'| at
+    most zero_speed) takes the kappa of the interval's start."""
     n_ctrl = coef.shape[0]
     for _ in range(REFINE_ROUNDS):
         split = np.zeros(u.size, dtype=np.bool_)
@@ -402,7 +605,7 @@ def _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed, kappa_floor)
                 c = point_d2(knots, coef, degree, span, mid)
                 k_mid, s_mid = curvature(c[3], c[4], c[5], c[6], c[7], c[8])
                 u_new[n] = mid
-                k_new[n] = k_mid if math.isfinite(k_mid) else kappa[q]
+                k_new[n] = k_mid if math.isfinite(k_mid) and s_mid > zero_speed else kappa[q]
                 s_new[n] = s_mid
                 n += 1
         u, kappa, speed = u_new, k_new, s_new
@@ -410,11 +613,16 @@ def _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed, kappa_floor)
 
 
 @jit
-def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor):
-    """Steps 1-4: nodes u, kappa, |C'| (M,), refined peak parameters (P,), corners (Q,), and
-    the mean |C'| over the samples (the arc length tolerance's scale)."""
+def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, floor_mm):
+    """Steps 1-4: nodes u, kappa, |C'| (M,), refined peak parameters (P,), stops (Q,) with
+    the cosine of their turn (Q,), and the mean |C'| over the samples (the arc length
+    tolerance's scale)."""
     u, kappa, speed = _samples(knots, coef, degree, breaks, spacing_mm)
     mean_speed = speed.mean()
+    zero_speed = ZERO_SPEED_REL * mean_speed
+    for q in range(u.size):
+        if speed[q] <= zero_speed:
+            kappa[q] = math.nan
     _fill_singular(kappa)
     idx = _prominent_maxima(kappa)
     peak_u = np.empty(idx.size)
@@ -422,13 +630,27 @@ def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor):
         refined_u, refined_kappa = _refine_peak(knots, coef, degree, u[idx[k] - 1],
                                                 u[idx[k] + 1], kappa_floor)
         peak_u[k] = refined_u if refined_kappa > kappa[idx[k]] else u[idx[k]]
-    corner_u = _corners(knots, coef, degree, breaks)
-    extra = np.concatenate((peak_u, corner_u, extra_u))
-    u, kappa, speed = _merge(knots, coef, degree, u, kappa, speed, extra)
+    corner_u = _corners(knots, coef, degree, breaks, floor_mm)
+    zero_u, zero_cos = _stops(knots, coef, degree, breaks, u, speed, zero_speed, floor_mm,
+                              kappa_floor)
+    stop_u = np.concatenate((corner_u, zero_u))
+    stop_cos = np.concatenate((np.zeros(corner_u.size), zero_cos))
+    order = np.argsort(stop_u)
+    stop_u = stop_u[order]
+    stop_cos = stop_cos[order]
+    # kappa grows without bound into a cusp, so its "maximum" is the refinement's bracket end:
+    # a peak whose bracket holds a stop adds nothing, the motion rests there anyway
+    keep = np.ones(idx.size, dtype=np.bool_)
+    for k in range(idx.size):
+        q = np.searchsorted(stop_u, u[idx[k] - 1])
+        keep[k] = not (q < stop_u.size and stop_u[q] <= u[idx[k] + 1])
+    peak_u = peak_u[keep]
+    extra = np.concatenate((peak_u, stop_u, extra_u))
+    u, kappa, speed = _merge(knots, coef, degree, u, kappa, speed, extra, zero_speed)
     _fill_singular(kappa)
     u, kappa, speed = _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed,
-                                                kappa_floor)
-    return u, kappa, speed, peak_u, corner_u, mean_speed
+                                                kappa_floor, zero_speed)
+    return u, kappa, speed, peak_u, stop_u, stop_cos, mean_speed
 
 
 def build_grid(curve: NurbsCurve, spacing_mm: float, extra_u: np.ndarray = np.empty(0),
@@ -440,13 +662,24 @@ def build_grid(curve: NurbsCurve, spacing_mm: float, extra_u: np.ndarray = np.em
     maxima below it need refining.
     """
     knots, coef, degree = curve.knots, curve.span_polynomials, curve.degree
-    u, kappa, speed, peak_u, corner_u, mean_speed = _grid_nodes(
+    floor_mm = TANGENT_CHORD_REL * polygon_length(curve.points)
+    u, kappa, speed, peak_u, stop_u, stop_cos, mean_speed = _grid_nodes(
         knots, coef, degree, curve.span_breaks, float(spacing_mm),
-        np.ascontiguousarray(extra_u, dtype=float), float(kappa_floor))
-    corner_index = np.searchsorted(u, corner_u)
-    kappa[corner_index] = np.inf
+        np.ascontiguousarray(extra_u, dtype=float), float(kappa_floor), floor_mm)
+    # two stops on one node (a corner knot where C' also vanishes) are one: the sharper turn
+    stop_index, first = np.unique(np.searchsorted(u, stop_u), return_index=True)
+    stop_cos = np.minimum.reduceat(stop_cos, first) if stop_cos.size else stop_cos
     peak_index = np.searchsorted(u, np.sort(peak_u))
     s = simpson_lengths(knots, coef, degree, u, speed, ARC_REL_TOL * (mean_speed + 1e-300))
-    for a in (u, s, kappa, peak_index, corner_index):
+    # stops with no length between them (a span whose control points are all equal) are one
+    # place: the first stands, the others become plain nodes with the kappa that follows them
+    same = np.flatnonzero(np.diff(s[stop_index]) <= floor_mm) + 1
+    if same.size:
+        for n in stop_index[same][::-1]:
+            kappa[n] = kappa[n + 1]
+        stop_index = np.delete(stop_index, same)
+        stop_cos = np.delete(stop_cos, same)
+    kappa[stop_index] = np.inf
+    for a in (u, s, kappa, peak_index, stop_index, stop_cos):
         a.setflags(write=False)
-    return Grid(u, s, kappa, peak_index, corner_index)
+    return Grid(u, s, kappa, peak_index, stop_index, stop_cos)

@@ -3,7 +3,8 @@ everywhere, whole periods (SPEC §2).
 
 1. Grid: nodes <= 2 v_m T apart with arc length and curvature (planning.grid).
 2. Key points: both ends (speed 0), every curvature maximum with kappa >= kappa_0 (nominal speed
-   from Eq. 15), every sharp corner (speed 0), every change of programmed feed.
+   from Eq. 15), every stop of the grid (a corner, cusp or reversal: speed 0), every change of
+   programmed feed.
 3. Bidirectional scan (Eq. 22): backward from the end, each key speed is lowered until the next
    one is reachable by deceleration within the segment; forward from the start likewise by
    acceleration. v_i = min(nominal, backward, forward).
@@ -35,7 +36,7 @@ import numpy as np
 
 from nurbsfeed.geometry.nurbs import NurbsCurve
 from nurbsfeed.jit import jit
-from nurbsfeed.planning.grid import Grid, build_grid
+from nurbsfeed.planning.grid import Grid, build_grid, polygon_length
 from nurbsfeed.planning.limits import Limits, curvature_threshold, speed_limit
 from nurbsfeed.planning.scurve import scan_speeds, segment_profiles
 from nurbsfeed.planning.timelaw import TimeLaw, chain_segments, speed_at_arc
@@ -47,9 +48,9 @@ MAX_GRID_NODES = 200_000  # per curve: spacing grows for very long curves at tin
 PERIOD_ROUNDING_REL = 1e-9  # a duration within this of a whole period count is not stretched
 HOLD_ROOM = 0.05  # holds leave at least this fraction of a segment for its transitions
 
-KIND_END, KIND_PEAK, KIND_CORNER, KIND_FEED, KIND_HOLD = range(5)
+KIND_END, KIND_PEAK, KIND_CORNER, KIND_FEED, KIND_HOLD, KIND_CUSP = range(6)
 KIND_NAMES = {KIND_END: "end", KIND_PEAK: "peak", KIND_CORNER: "corner", KIND_FEED: "feed",
-              KIND_HOLD: "hold"}
+              KIND_HOLD: "hold", KIND_CUSP: "cusp"}
 
 
 @dataclass(frozen=True, eq=False)
@@ -118,22 +119,13 @@ def feed_at(u: np.ndarray, feed_u: np.ndarray, feed_mm_s: np.ndarray) -> np.ndar
 
 
 @jit
-def _polygon_length(points):
-    """Length of the control polygon (N, 3): the curve is no longer."""
-    total = 0.0
-    for i in range(points.shape[0] - 1):
-        total += math.sqrt((points[i + 1, 0] - points[i, 0]) ** 2
-                           + (points[i + 1, 1] - points[i, 1]) ** 2
-                           + (points[i + 1, 2] - points[i, 2]) ** 2)
-    return total
-
-
-@jit
-def _key_points(kappa, raw_limit, fcap, corner_index, peak_index, feed_nodes, kappa0, feed_cap):
+def _key_points(kappa, raw_limit, fcap, stop_index, stop_cos, peak_index, feed_nodes, kappa0,
+                feed_cap):
     """Steps 2 and 5's limit: the eroded limit (M,), key nodes, kinds and nominal speeds (K,),
     segment caps (K-1,) and the number of peaks with kappa >= kappa0.
 
-    Corners and cusps (kappa infinite inside the curve) are stops, passed at rest. The eroded
+    Stops (grid step 3: corners, and cusps or reversals where the tangent turns back, cos < 0;
+    kappa infinite inside the curve) are passed at rest. The eroded
     limit is min(raw[i-1], raw[i], raw[i+1]) per node, except that a stop (limit 0) does not
     spread to its neighbours (beside a corner the curvature is finite): it borrows their limits
     while eroding. Key kinds: the ends, then feed changes, peaks with kappa >= kappa0 and stops
@@ -155,15 +147,16 @@ def _key_points(kappa, raw_limit, fcap, corner_index, peak_index, feed_nodes, ka
             n_peaks += 1
             if 0 < n < last:
                 kind[n] = KIND_PEAK
-    for n in corner_index:
+    for q in range(stop_index.size):
+        n = stop_index[q]
         if 0 < n < last:
-            kind[n] = KIND_CORNER
+            kind[n] = KIND_CUSP if stop_cos[q] < 0.0 else KIND_CORNER
     for n in range(1, last):
-        if math.isinf(kappa[n]):
+        if math.isinf(kappa[n]) and kind[n] != KIND_CUSP:
             kind[n] = KIND_CORNER
     borrowed = raw_limit.copy()
     for n in range(1, last):
-        if kind[n] == KIND_CORNER:
+        if kind[n] == KIND_CORNER or kind[n] == KIND_CUSP:
             borrowed[n] = min(raw_limit[n - 1], raw_limit[n + 1])
     limit = borrowed.copy()
     for n in range(size):
@@ -171,13 +164,13 @@ def _key_points(kappa, raw_limit, fcap, corner_index, peak_index, feed_nodes, ka
             limit[n] = min(limit[n], borrowed[n - 1])
         if n < last:
             limit[n] = min(limit[n], borrowed[n + 1])
-        if kind[n] == KIND_CORNER:
+        if kind[n] == KIND_CORNER or kind[n] == KIND_CUSP:
             limit[n] = 0.0
     key_node = np.flatnonzero(kind >= 0)
     key_kind = kind[key_node]
     nominal = limit[key_node]
     for k in range(key_node.size):
-        if key_kind[k] == KIND_END or key_kind[k] == KIND_CORNER:
+        if key_kind[k] == KIND_END or key_kind[k] == KIND_CORNER or key_kind[k] == KIND_CUSP:
             nominal[k] = 0.0
     for n in feed_nodes:
         k = np.searchsorted(key_node, n)
@@ -328,7 +321,7 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
 def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
                feed_mm_s: np.ndarray = np.empty(0)) -> Plan:
     """Plan the feed along one curve under `lim` (feed cap already in lim.feed_mm_s)."""
-    rough_length = _polygon_length(curve.points)
+    rough_length = polygon_length(curve.points)
     spacing = max(GRID_STEPS * lim.feed_mm_s * lim.period_s, rough_length / MAX_GRID_NODES)
     feed_breaks = feed_u[1:] if feed_u.size else feed_u
     kappa0 = curvature_threshold(lim)
@@ -336,8 +329,8 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
     fcap = feed_at(grid.u, feed_u, feed_mm_s)
     feed_nodes = np.searchsorted(grid.u, feed_breaks)
     limit, key_node, key_kind, nominal, cap, n_peaks = _key_points(
-        grid.kappa_1_mm, speed_limit(grid.kappa_1_mm, lim, fcap), fcap, grid.corner_index,
-        grid.peak_index, feed_nodes, kappa0, lim.feed_mm_s)
+        grid.kappa_1_mm, speed_limit(grid.kappa_1_mm, lim, fcap), fcap, grid.stop_index,
+        grid.stop_cos, grid.peak_index, feed_nodes, kappa0, lim.feed_mm_s)
     hold_start = np.zeros(len(key_node) - 1)
     hold_end = np.zeros(len(key_node) - 1)
     v, peak, *pieces, key_t, duration, v_nodes, rounds = _limit_rounds(

@@ -1,0 +1,170 @@
+"""Degenerate geometry (repeated control points, corners, cusps, reversals, zero-length spans):
+never a wild move.
+
+Each file of tests/data/degenerate/ is one case with what it must produce: where the motion
+rests (stops, with their kind), and that the motion measured from positions (tests/motion_check)
+keeps the profile. A hypothesis property does the same over random curves built to contain such
+places: every point on the curve, at rest at every stop, no limit exceeded from positions, and
+the written program arriving where and when the plan does.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
+
+from nurbsfeed.gcode.writer import MoveWriter
+from nurbsfeed.geometry import NurbsCurve
+from nurbsfeed.interpolate import interpolate
+from nurbsfeed.machine import load_machine
+from nurbsfeed.planning.limits import Limits
+from nurbsfeed.planning.planner import KIND_CORNER, KIND_CUSP, KIND_NAMES, plan_curve
+from tests.motion_check import FD_REL, motion, written_moves
+
+CASES = Path(__file__).parent / "data" / "degenerate"
+DEFAULT = Limits.from_machine(load_machine("default"))
+# At rest: the moves on either side of a stop are at most this long (v <= 1 mm/s at 1 ms).
+REST_MOVE_MM = 1e-3
+# Hypothesis examples of the random-curve property; NURBSFEED_PROPERTY_EXAMPLES raises it for a
+# long run (the closing note of issue 11 records one).
+EXAMPLES = int(os.environ.get("NURBSFEED_PROPERTY_EXAMPLES", "300"))
+
+
+def load(name: str) -> NurbsCurve:
+    raw = json.loads((CASES / f"{name}.json").read_text())["curves"][0]
+    return NurbsCurve.build(raw["degree"], raw["knots"], raw["control_points"],
+                            raw.get("weights"), name)
+
+
+# file -> the stops the plan must find, as (u, kind), and the length of the path
+EXPECTED = {
+    # a quadratic written P0 P0 P2 with weights 1, 0.544, 1 is a straight line; once written
+    # as ONE G1 at F1.7e6 (|C'(0)| was 1.8e-15, not 0, and kappa 9.9e30 there)
+    "repeated-start-weighted": ([], None),
+    "repeated-end-weighted": ([], None),
+    # a control point repeated `degree` times with simple knots: C' = 0 there, the path turns
+    # by 90 degrees (G0 continuity written the usual NURBS way)
+    "corner-tripled-point": ([(0.5, "corner")], 40.0),
+    # a line that turns back on itself at u = 0.5: C' = 0 and the tangent reverses
+    "reversal-on-a-line": ([(0.5, "cusp")], 20.0),
+    # a cubic Bezier with a cusp at u = 0.5 (x' = 3 (1 - 2u)^2, y' = 3 - 6u, times 10)
+    "cubic-cusp": ([(0.5, "cusp")], None),
+    # x = 10 (2u - 1)^3 on a line: C'(0.5) = 0 but the path goes straight through: no stop
+    "removable-zero-on-a-line": ([], 20.0),
+    # four equal control points: the span [0.4, 0.6] has zero length, one corner
+    "zero-length-span": ([(0.4, "corner")], None),
+    # a double knot with the control point there repeated on both sides: C' = 0 from both
+    "double-knot-corner-repeated-point": ([(0.5, "corner")], 20.0),
+}
+
+
+def assert_motion_within(points: np.ndarray, lim: Limits) -> None:
+    """Speed and accelerations from positions keep the profile (tests/motion_check)."""
+    m = motion(points, lim.period_s)
+    assert np.isfinite(points).all()
+    assert m.speed_mm_s.max() <= lim.feed_mm_s * (1 + 1e-6)
+    assert m.tangential_acc_mm_s2.max() <= lim.acc_mm_s2 * (1 + FD_REL)
+    assert m.normal_acc_mm_s2.max() <= lim.normal_acc_mm_s2 * (1 + FD_REL)
+
+
+def assert_rests_at(points: np.ndarray, u: np.ndarray, curve: NurbsCurve,
+                    stop_u: float) -> None:
+    """A point falls on the stop (the one of parameter nearest to it: a path may pass the
+    same place twice), and the moves on either side are at rest."""
+    k = int(np.argmin(np.abs(u - stop_u)))
+    assert np.linalg.norm(points[k] - curve.point(stop_u)) <= 1e-9
+    assert 0 < k < len(points) - 1
+    steps = np.linalg.norm(np.diff(points[k - 1:k + 2], axis=0), axis=1)
+    assert steps.max() <= REST_MOVE_MM, steps
+
+
+@pytest.mark.parametrize("name", sorted(EXPECTED))
+def test_degenerate_case(name: str) -> None:
+    curve = load(name)
+    stops, length_mm = EXPECTED[name]
+    plan = plan_curve(curve, Limits.from_machine(load_machine("default"), 100.0))
+    found = [(float(plan.key_u[k]), KIND_NAMES[int(plan.key_kind[k])])
+             for k in range(plan.key_u.size) if plan.key_kind[k] in (KIND_CORNER, KIND_CUSP)]
+    assert [kind for _, kind in found] == [kind for _, kind in stops]
+    assert [u for u, _ in found] == pytest.approx([u for u, _ in stops], abs=1e-9)
+    if length_mm is not None:
+        assert plan.length_mm == pytest.approx(length_mm, rel=1e-9)
+    result = interpolate(plan)
+    assert result.n_points == plan.n_periods + 1
+    np.testing.assert_array_equal(result.points[0], curve.points[0])
+    np.testing.assert_array_equal(result.points[-1], curve.points[-1])
+    assert_motion_within(result.points, plan.limits)
+    for stop_u, _ in stops:
+        assert_rests_at(result.points, result.u, curve, stop_u)
+    # the path is followed: no step longer than the feed allows (the collapse wrote one G1)
+    assert result.n_points >= plan.length_mm / (plan.limits.feed_mm_s * plan.limits.period_s)
+
+
+def test_removable_zero_is_passed_at_speed() -> None:
+    """The straight line through a removable zero of C' is not slowed there: its cycle is the
+    one of a plain straight 20 mm line."""
+    through = plan_curve(load("removable-zero-on-a-line"), DEFAULT)
+    line = plan_curve(NurbsCurve.build(1, [0, 0, 1, 1], [[-10, 0], [10, 0]]), DEFAULT)
+    assert through.cycle_time_s == pytest.approx(line.cycle_time_s, abs=2 * DEFAULT.period_s)
+
+
+@st.composite
+def degenerate_curves(draw) -> NurbsCurve:
+    """Curves of degree 2-4 with runs of repeated control points (up to degree + 1 copies, at
+    the ends too), random weights, and knots of full multiplicity (corners) at random."""
+    degree = draw(st.integers(2, 4))
+    n_distinct = draw(st.integers(2, 6))
+    coords = st.floats(-30, 30, allow_nan=False).map(lambda x: round(x, 3))
+    distinct = [[draw(coords), draw(coords)] for _ in range(n_distinct)]
+    points = []
+    for p in distinct:
+        points.extend([p] * draw(st.sampled_from([1, 1, 1, 2, degree, degree + 1])))
+    if len(points) < degree + 1:
+        points.extend([distinct[-1]] * (degree + 1 - len(points)))
+    n = len(points)
+    inner = sorted(draw(st.lists(st.integers(1, 19), min_size=n - degree - 1,
+                                 max_size=n - degree - 1)))
+    for i in range(len(inner) - degree + 1):  # at most `degree` equal interior knots
+        if len(set(inner[i:i + degree])) == 1 and i + degree < len(inner):
+            assume(inner[i + degree] != inner[i])
+    knots = [0] * (degree + 1) + [k / 20 for k in inner] + [1] * (degree + 1)
+    weights = [draw(st.sampled_from([1.0, 1.0, 0.5, 2.0, 0.2, 5.0])) for _ in range(n)]
+    curve = NurbsCurve.build(degree, knots, points, weights)
+    assume(not curve.is_degenerate)
+    return curve
+
+
+@settings(max_examples=EXAMPLES, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
+@given(degenerate_curves(), st.sampled_from([20.0, 100.0, 200.0]))
+def test_random_degenerate_curves_move_on_the_curve_within_the_limits(curve, feed_mm_s) -> None:
+    lim = Limits.from_machine(load_machine("default"), feed_mm_s)
+    plan = plan_curve(curve, lim)
+    assume(plan.n_periods < 40_000)  # keep the example fast; long plans are no different
+    result = interpolate(plan)
+    points = result.points
+    # every point on the curve: C(u_k), the ends exactly
+    np.testing.assert_allclose(points, curve.point(result.u), rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(points[-1], curve.points[-1])
+    assert result.n_points == plan.n_periods + 1
+    assert_motion_within(points, lim)
+    for k in np.flatnonzero(np.isin(plan.key_kind, (KIND_CORNER, KIND_CUSP))):
+        assert_rests_at(points, result.u, curve, float(plan.key_u[k]))
+    # the written program: each point within the output rounding of the point due at its
+    # time (from the written lengths and F words), and arriving when the plan ends
+    out = io.BytesIO()
+    writer = MoveWriter(out, 4, 3, lim.period_s, "\n", points[0])
+    writer.write_curve(points)
+    written, period = written_moves(out.getvalue().decode(), points[0], lim.period_s)
+    rounding_mm = 0.5e-4 * np.sqrt(3)
+    assert period[-1] == plan.n_periods
+    assert np.all(np.diff(period) >= 1)
+    deviation = np.linalg.norm(written - points[period], axis=1)
+    assert deviation.max() <= rounding_mm * (1 + 1e-9)
