@@ -9,6 +9,7 @@ target and renamed into place only when the whole conversion succeeded.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import os
 import tempfile
 from dataclasses import dataclass, field
@@ -17,7 +18,7 @@ from typing import BinaryIO, Callable, Iterator
 
 import numpy as np
 
-from nurbsfeed.errors import InputError, Location
+from nurbsfeed.errors import CurveError, InputError, Location
 from nurbsfeed.gcode.writer import MoveWriter, cycle_comment
 from nurbsfeed.interpolate import Interpolation, interpolate
 from nurbsfeed.json_reader import json_program
@@ -25,6 +26,7 @@ from nurbsfeed.machine import Machine
 from nurbsfeed.planning.limits import Limits
 from nurbsfeed.planning.planner import Plan, plan_curve
 from nurbsfeed.program import CurveBlock, PassThrough, ProgramItem
+from nurbsfeed.safety import MotionGuard, feed_cap_mm_s
 
 ENCODING = "utf-8"
 ERRORS = "surrogateescape"  # any byte sequence round-trips unchanged
@@ -118,6 +120,11 @@ def convert_block(block: CurveBlock, index: int, out: BinaryIO, machine: Machine
     units_machine = machine.in_program_units(block.units)
     plan = plan_block(block, machine)
     interp = interpolate(plan, method)
+    guard_limits = dataclasses.replace(plan.limits, feed_mm_s=feed_cap_mm_s(plan.limits, block))
+    try:
+        MotionGuard(guard_limits, f"curve {index}").check(interp.points)
+    except CurveError as exc:
+        raise exc.at(block.location) from None
     eol = block.eol.encode("ascii")
     out.write(cycle_comment(index, block.curve.name, interp.n_points, plan.limits.period_s,
                             method, plan.cycle_time_s, plan.length_mm,

@@ -1,0 +1,103 @@
+"""The last look at a curve's points before they become moves: what the machine would do.
+
+The planner and the interpolator keep the limits by construction; this guard does not trust
+them. It reads the points as positions one period apart, as a controller executing one move per
+period would, and refuses the curve (a located CurveError: exit 2, no output file) if any of
+them is not finite, a move is faster than the feed cap allows, or a second difference shows an
+acceleration the profile cannot give. A bug that would otherwise send a wild move to a machine
+(a whole curve collapsed into one G1, a corner taken at full feed) is stopped here.
+
+Bounds, with room for the finite differences of one period (a second difference is the
+acceleration to O(T^2 j'), its chordal normal part v^2 kappa to O((kappa v T)^2)):
+    |P_k+1 - P_k|                 <= v_m T (1 + GUARD_FEED_REL)
+    |P_k+1 - 2 P_k + P_k-1| / T^2 <= sqrt(A_t^2 + A_n^2) (1 + GUARD_ACC_REL)
+plus GUARD_ABS_MM of rounding on every difference. The bounds are necessary, not sufficient:
+`nurbsfeed check` and the tests measure each limit on its own.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from nurbsfeed.errors import CurveError
+from nurbsfeed.jit import jit
+from nurbsfeed.planning.limits import Limits
+from nurbsfeed.program import CurveBlock
+
+GUARD_FEED_REL = 1e-6
+GUARD_ACC_REL = 0.05
+GUARD_ABS_MM = 1e-9
+
+
+@jit
+def _first_wild(points, before, max_step_mm, max_turn_mm):
+    """The first k of points (N, 3), after the points `before` (2, 3: the last but one, the last; NaN: none), whose
+    move or second difference breaks its bound, and what broke (0 none, 1 not finite, 2 step,
+    3 second difference) with its size."""
+    px, py, pz = before[1, 0], before[1, 1], before[1, 2]
+    qx, qy, qz = before[0, 0], before[0, 1], before[0, 2]
+    for k in range(points.shape[0]):
+        x, y, z = points[k, 0], points[k, 1], points[k, 2]
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
+            return k, 1, 0.0
+        if px == px:
+            step = math.sqrt((x - px) ** 2 + (y - py) ** 2 + (z - pz) ** 2)
+            if step > max_step_mm:
+                return k, 2, step
+            if qx == qx:
+                turn = math.sqrt((x - 2.0 * px + qx) ** 2 + (y - 2.0 * py + qy) ** 2
+                                 + (z - 2.0 * pz + qz) ** 2)
+                if turn > max_turn_mm:
+                    return k, 3, turn
+        qx, qy, qz = px, py, pz
+        px, py, pz = x, y, z
+    return -1, 0, 0.0
+
+
+def feed_cap_mm_s(lim: Limits, block: CurveBlock) -> float:
+    """The highest feed anywhere on the block's curve: the machine's, or the highest programmed
+    F if one covers the whole curve."""
+    if block.feed_mm_s.size and block.feed_u[0] <= block.curve.u_min:
+        return min(lim.feed_mm_s, float(block.feed_mm_s.max()))
+    return lim.feed_mm_s
+
+
+class MotionGuard:
+    """Checks a curve's points chunk by chunk, in order, as they are handed to the writer."""
+
+    def __init__(self, lim: Limits, curve_label: str) -> None:
+        period = lim.period_s
+        self.max_step_mm = lim.feed_mm_s * period * (1.0 + GUARD_FEED_REL) + GUARD_ABS_MM
+        acc = math.hypot(lim.acc_mm_s2, lim.normal_acc_mm_s2)
+        self.max_turn_mm = acc * period**2 * (1.0 + GUARD_ACC_REL) + 4.0 * GUARD_ABS_MM
+        self.period_s = period
+        self.feed_mm_s = lim.feed_mm_s
+        self.acc_mm_s2 = acc
+        self.label = curve_label
+        self.before = np.full((2, 3), np.nan)
+        self.seen = 0
+
+    def check(self, points: np.ndarray) -> None:
+        """points (N, 3): the next points of the curve, one period apart."""
+        points = np.ascontiguousarray(points, dtype=float)
+        k, what, size = _first_wild(points, self.before, self.max_step_mm, self.max_turn_mm)
+        if k >= 0:
+            at = self.seen + k
+            if what == 1:
+                problem = "is not a finite number"
+            elif what == 2:
+                problem = (f"would move at {size / self.period_s:.6g} mm/s, above the feed cap "
+                           f"of {self.feed_mm_s:.6g} mm/s")
+            else:
+                problem = (f"would accelerate at {size / self.period_s**2:.6g} mm/s^2, above "
+                           f"the profile's {self.acc_mm_s2:.6g} mm/s^2 (tangential and normal)")
+            raise CurveError(f"{self.label}: refused, point {at} {problem}; nothing was "
+                             f"written (a safety check: please report this curve)")
+        n = points.shape[0]
+        if n >= 2:
+            self.before = points[-2:].copy()
+        elif n == 1:
+            self.before = np.stack([self.before[1], points[0]])
+        self.seen += n
