@@ -62,7 +62,14 @@ EXPECTED = {
     "zero-length-span": ([(0.4, "corner")], None),
     # a double knot with the control point there repeated on both sides: C' = 0 from both
     "double-knot-corner-repeated-point": ([(0.5, "corner")], 20.0),
+    # weights 1e-5 beside the ends: a hook of ~4 nm radius at each end and a near corner in
+    # the middle (planned once at 5e6 s: the whole segment capped at the hook's limit)
+    "weights-near-zero": ([], 35.0),
+    # a weight of 1e4 in the middle: three sharp peaks within 6 um (planned once at 41 s)
+    "weight-1e4": ([], None),
 }
+# file -> the most its plan may take under the default profile at 100 mm/s (s)
+CYCLE_AT_MOST_S = {"weights-near-zero": 0.6, "weight-1e4": 0.7}
 
 
 def assert_motion_within(points: np.ndarray, lim: Limits) -> None:
@@ -96,6 +103,7 @@ def test_degenerate_case(name: str) -> None:
     assert [u for u, _ in found] == pytest.approx([u for u, _ in stops], abs=1e-9)
     if length_mm is not None:
         assert plan.length_mm == pytest.approx(length_mm, rel=1e-9)
+    assert plan.cycle_time_s <= CYCLE_AT_MOST_S.get(name, np.inf)
     result = interpolate(plan)
     assert result.n_points == plan.n_periods + 1
     np.testing.assert_array_equal(result.points[0], curve.points[0])

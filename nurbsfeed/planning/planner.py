@@ -48,9 +48,10 @@ MAX_GRID_NODES = 200_000  # per curve: spacing grows for very long curves at tin
 PERIOD_ROUNDING_REL = 1e-9  # a duration within this of a whole period count is not stretched
 HOLD_ROOM = 0.05  # holds leave at least this fraction of a segment for its transitions
 
-KIND_END, KIND_PEAK, KIND_CORNER, KIND_FEED, KIND_HOLD, KIND_CUSP = range(6)
+SHOULDER_ROUNDS = 4  # times key points are added where a segment from rest was too fast
+KIND_END, KIND_PEAK, KIND_CORNER, KIND_FEED, KIND_HOLD, KIND_CUSP, KIND_SHOULDER = range(7)
 KIND_NAMES = {KIND_END: "end", KIND_PEAK: "peak", KIND_CORNER: "corner", KIND_FEED: "feed",
-              KIND_HOLD: "hold", KIND_CUSP: "cusp"}
+              KIND_HOLD: "hold", KIND_CUSP: "cusp", KIND_SHOULDER: "shoulder"}
 
 
 @dataclass(frozen=True, eq=False)
@@ -120,7 +121,7 @@ def feed_at(u: np.ndarray, feed_u: np.ndarray, feed_mm_s: np.ndarray) -> np.ndar
 
 @jit
 def _key_points(kappa, raw_limit, fcap, stop_index, stop_cos, peak_index, feed_nodes, kappa0,
-                feed_cap):
+                feed_cap, shoulder_nodes):
     """Steps 2 and 5's limit: the eroded limit (M,), key nodes, kinds and nominal speeds (K,),
     segment caps (K-1,) and the number of peaks with kappa >= kappa0.
 
@@ -129,9 +130,10 @@ def _key_points(kappa, raw_limit, fcap, stop_index, stop_cos, peak_index, feed_n
     limit is min(raw[i-1], raw[i], raw[i+1]) per node, except that a stop (limit 0) does not
     spread to its neighbours (beside a corner the curvature is finite): it borrows their limits
     while eroding. Key kinds: the ends, then feed changes, peaks with kappa >= kappa0 and stops
-    (a later kind wins at a node); nominal speed 0 at the ends and stops, the limit at the
-    others, and at a feed change the lower of the two feeds. A segment's cap is the lowest feed
-    over its nodes, from its first key node to the next one (the last node included).
+    (a later kind wins at a node), and the shoulders `plan_curve` adds; nominal speed 0 at the
+    ends and stops, the limit at the others, and at a feed change the lower of the two feeds.
+    A segment's cap is the lowest feed over its nodes, from its first key node to the next one
+    (the last node included).
     """
     size = kappa.size
     last = size - 1
@@ -141,6 +143,9 @@ def _key_points(kappa, raw_limit, fcap, stop_index, stop_cos, peak_index, feed_n
     for n in feed_nodes:
         if 0 < n < last:
             kind[n] = KIND_FEED
+    for n in shoulder_nodes:
+        if 0 < n < last:
+            kind[n] = KIND_SHOULDER
     n_peaks = 0
     for n in peak_index:
         if kappa[n] >= kappa0:
@@ -225,7 +230,10 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
     than HOLD_ROOM of the segment: cap the segment at the lowest limit of its fast nodes.
     Returns key speeds (K,), peak speeds (K-1,), the law's pieces (timelaw.chain_segments), the
     law's speed at every node where it could exceed the limit (M,; 0 at the others and at key
-    nodes) and the number of fix rounds.
+    nodes), the number of fix rounds and, per segment (K-1,), the node where the law was too
+    fast farthest from a rest it leaves or nearest to a rest it comes to (-1: none): there a
+    hold cannot help (it would hold speed 0), so the segment's cap was lowered, and
+    `plan_curve` adds a key point there instead.
     """
     key_s = s_mm[key_node]
     length = key_s[1:] - key_s[:-1]
@@ -235,6 +243,7 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
     seen = np.full((n_seg, 5), np.nan)
     v_nodes = np.zeros(s_mm.size)
     checked = np.empty(s_mm.size, dtype=np.int64)
+    from_rest = np.full(n_seg, -1, dtype=np.int64)
     rounds = 0
     while True:
         free = np.maximum(length - hold_start - hold_end, 0.0)
@@ -271,6 +280,8 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
             decel_start = key_s[seg + 1] - hold_end[seg] - d_down[seg]
             first_up = np.inf
             last_down = -np.inf
+            last_up_node = -1
+            first_down_node = -1
             lowest = np.inf
             up = False
             down = False
@@ -283,9 +294,12 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
                 if s < accel_end:
                     up = True
                     first_up = min(first_up, s)
+                    last_up_node = node
                 elif s > decel_start:
                     down = True
                     last_down = max(last_down, s)
+                    if first_down_node < 0:
+                        first_down_node = node
                 else:
                     mid = True
             if not (up or down or mid):
@@ -298,6 +312,10 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
             if down and v[seg + 1] > 0.0:
                 new_end = max(new_end, key_s[seg + 1] - last_down)
             lower_cap = mid or (up and v[seg] == 0.0) or (down and v[seg + 1] == 0.0)
+            if up and v[seg] == 0.0:
+                from_rest[seg] = last_up_node
+            elif down and v[seg + 1] == 0.0:
+                from_rest[seg] = first_down_node
             # A hold shortens what is left for the transitions; the next scan lowers the key
             # speeds until they fit. Holds that would meet leave no room: lower the cap instead.
             if new_start + new_end < length[seg] * (1.0 - HOLD_ROOM):
@@ -315,7 +333,7 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
         rounds += 1
         if not changed:
             break
-    return v, peak, t0, s0, v0, a0, jk, key_t, duration, v_nodes, rounds
+    return v, peak, t0, s0, v0, a0, jk, key_t, duration, v_nodes, rounds, from_rest
 
 
 def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
@@ -328,14 +346,25 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
     grid = build_grid(curve, spacing, feed_breaks, kappa0)
     fcap = feed_at(grid.u, feed_u, feed_mm_s)
     feed_nodes = np.searchsorted(grid.u, feed_breaks)
-    limit, key_node, key_kind, nominal, cap, n_peaks = _key_points(
-        grid.kappa_1_mm, speed_limit(grid.kappa_1_mm, lim, fcap), fcap, grid.stop_index,
-        grid.stop_cos, grid.peak_index, feed_nodes, kappa0, lim.feed_mm_s)
-    hold_start = np.zeros(len(key_node) - 1)
-    hold_end = np.zeros(len(key_node) - 1)
-    v, peak, *pieces, key_t, duration, v_nodes, rounds = _limit_rounds(
-        grid.s_mm, limit, key_node, nominal, cap, hold_start, hold_end, lim.acc_mm_s2,
-        lim.jerk_mm_s3)
+    raw_limit = speed_limit(grid.kappa_1_mm, lim, fcap)
+    shoulders = np.empty(0, dtype=np.int64)
+    # Beside a rest where the limit rises steeply (a curve that starts with a hook, a weight
+    # near 0 beside an end) the S-curve from rest outruns the limit and no hold can help; the
+    # segment's cap would fall to that limit all along it. A key point at the last such node
+    # (a shoulder) confines the low cap to the short segment from the rest to it.
+    for _ in range(SHOULDER_ROUNDS + 1):
+        limit, key_node, key_kind, nominal, cap, n_peaks = _key_points(
+            grid.kappa_1_mm, raw_limit, fcap, grid.stop_index, grid.stop_cos, grid.peak_index,
+            feed_nodes, kappa0, lim.feed_mm_s, shoulders)
+        hold_start = np.zeros(len(key_node) - 1)
+        hold_end = np.zeros(len(key_node) - 1)
+        v, peak, *pieces, key_t, duration, v_nodes, rounds, from_rest = _limit_rounds(
+            grid.s_mm, limit, key_node, nominal, cap, hold_start, hold_end, lim.acc_mm_s2,
+            lim.jerk_mm_s3)
+        new = np.setdiff1d(from_rest[from_rest >= 0], key_node)
+        if new.size == 0 or shoulders.size >= SHOULDER_ROUNDS * max(1, key_node.size):
+            break
+        shoulders = np.union1d(shoulders, new)
     law = TimeLaw.from_pieces(*pieces, key_t, duration, grid.length_mm)
 
     residual, piece_key, piece_periods, piece_scale = _whole_periods(
