@@ -67,9 +67,13 @@ EXPECTED = {
     "weights-near-zero": ([], 35.0),
     # a weight of 1e4 in the middle: three sharp peaks within 6 um (planned once at 41 s)
     "weight-1e4": ([], None),
+    # a 2 um reversal at the start, then out along x and back 2 um aside: a turn of ~5 nm
+    # radius (kappa 2e8; C' small but not 0), once held at 1e-5 mm/s for 2.6 s
+    "near-cusp-beside-repeated-points": ([(0.1, "cusp")], None),
 }
 # file -> the most its plan may take under the default profile at 100 mm/s (s)
-CYCLE_AT_MOST_S = {"weights-near-zero": 0.6, "weight-1e4": 0.7}
+CYCLE_AT_MOST_S = {"weights-near-zero": 0.6, "weight-1e4": 0.7,
+                   "near-cusp-beside-repeated-points": 0.8}
 
 
 def assert_motion_within(points: np.ndarray, lim: Limits) -> None:

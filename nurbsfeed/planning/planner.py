@@ -48,7 +48,8 @@ MAX_GRID_NODES = 200_000  # per curve: spacing grows for very long curves at tin
 PERIOD_ROUNDING_REL = 1e-9  # a duration within this of a whole period count is not stretched
 HOLD_ROOM = 0.05  # holds leave at least this fraction of a segment for its transitions
 
-SHOULDER_ROUNDS = 4  # times key points are added where a segment from rest was too fast
+SHOULDER_ROUNDS = 4  # times key points are added where a hold cannot (or should not) help
+HOLD_MAX_PERIODS = 16  # a hold longer than this (in time) becomes a shoulder key point
 KIND_END, KIND_PEAK, KIND_CORNER, KIND_FEED, KIND_HOLD, KIND_CUSP, KIND_SHOULDER = range(7)
 KIND_NAMES = {KIND_END: "end", KIND_PEAK: "peak", KIND_CORNER: "corner", KIND_FEED: "feed",
               KIND_HOLD: "hold", KIND_CUSP: "cusp", KIND_SHOULDER: "shoulder"}
@@ -218,7 +219,8 @@ def _whole_periods(v_key, key_t, key_node, limit, v_nodes, period_s):
 
 
 @jit
-def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc, jerk):
+def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc, jerk,
+                  max_hold_s):
     """Steps 3-5: scan, segments, time law, then fix rounds until the law keeps the eroded
     limit at every node (or MAX_FIX_ROUNDS, or a round that changes nothing).
 
@@ -230,10 +232,11 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
     than HOLD_ROOM of the segment: cap the segment at the lowest limit of its fast nodes.
     Returns key speeds (K,), peak speeds (K-1,), the law's pieces (timelaw.chain_segments), the
     law's speed at every node where it could exceed the limit (M,; 0 at the others and at key
-    nodes), the number of fix rounds and, per segment (K-1,), the node where the law was too
-    fast farthest from a rest it leaves or nearest to a rest it comes to (-1: none): there a
-    hold cannot help (it would hold speed 0), so the segment's cap was lowered, and
-    `plan_curve` adds a key point there instead.
+    nodes), the number of fix rounds and, per segment (K-1,), where `plan_curve` should add a
+    key point (a shoulder; -1: none): the node where the law was too fast farthest from the
+    key it leaves (nearest to the key it comes to), when that key is at rest (a hold of speed 0
+    cannot help, so the segment's cap was lowered) or when the hold would last longer than
+    max_hold_s (a key speed held over a long stretch of a steep limit: a near cusp).
     """
     key_s = s_mm[key_node]
     length = key_s[1:] - key_s[:-1]
@@ -312,9 +315,10 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
             if down and v[seg + 1] > 0.0:
                 new_end = max(new_end, key_s[seg + 1] - last_down)
             lower_cap = mid or (up and v[seg] == 0.0) or (down and v[seg + 1] == 0.0)
-            if up and v[seg] == 0.0:
+            if up and (v[seg] == 0.0 or first_up - key_s[seg] > v[seg] * max_hold_s):
                 from_rest[seg] = last_up_node
-            elif down and v[seg + 1] == 0.0:
+            elif down and (v[seg + 1] == 0.0
+                           or key_s[seg + 1] - last_down > v[seg + 1] * max_hold_s):
                 from_rest[seg] = first_down_node
             # A hold shortens what is left for the transitions; the next scan lowers the key
             # speeds until they fit. Holds that would meet leave no room: lower the cap instead.
@@ -351,7 +355,9 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
     # Beside a rest where the limit rises steeply (a curve that starts with a hook, a weight
     # near 0 beside an end) the S-curve from rest outruns the limit and no hold can help; the
     # segment's cap would fall to that limit all along it. A key point at the last such node
-    # (a shoulder) confines the low cap to the short segment from the rest to it.
+    # (a shoulder) confines the low cap to the short segment from the rest to it. Likewise
+    # beside a near cusp, where holding its tiny key speed up to the limit's rise would crawl
+    # for seconds: from a shoulder the speed rises with the limit.
     for _ in range(SHOULDER_ROUNDS + 1):
         limit, key_node, key_kind, nominal, cap, n_peaks = _key_points(
             grid.kappa_1_mm, raw_limit, fcap, grid.stop_index, grid.stop_cos, grid.peak_index,
@@ -360,7 +366,7 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
         hold_end = np.zeros(len(key_node) - 1)
         v, peak, *pieces, key_t, duration, v_nodes, rounds, from_rest = _limit_rounds(
             grid.s_mm, limit, key_node, nominal, cap, hold_start, hold_end, lim.acc_mm_s2,
-            lim.jerk_mm_s3)
+            lim.jerk_mm_s3, HOLD_MAX_PERIODS * lim.period_s)
         new = np.setdiff1d(from_rest[from_rest >= 0], key_node)
         if new.size == 0 or shoulders.size >= SHOULDER_ROUNDS * max(1, key_node.size):
             break
