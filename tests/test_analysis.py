@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from nurbsfeed.analysis import CHECKS, check_files, compare_file, curve_blocks
-from nurbsfeed.analysis.check import _derivative_estimate, _stencils, project_points
+from nurbsfeed.analysis.check import project_points
+from nurbsfeed.analysis.check.estimates import derivative_estimate, stencils
 from nurbsfeed.analysis.geometry import chord_errors_mm
 from nurbsfeed.interpolate import METHODS, interpolate
 from nurbsfeed.machine import load_machine
@@ -138,15 +139,15 @@ def test_divided_differences_are_exact_on_a_cubic_and_bound_the_noise() -> None:
     s = c[0] + c[1] * t + c[2] * t**2 + c[3] * t**3
     e = np.full(t.size, 1e-4)
     for order, exact in ((2, None), (3, 6 * c[3])):
-        idx = _stencils(t, order, 4e-3)
-        value, noise = _derivative_estimate(t, s, e, idx)
+        idx = stencils(t, order, 4e-3)
+        value, noise = derivative_estimate(t, s, e, idx)
         if exact is None:  # a = 2 c2 + 6 c3 t, a B-spline mean over the nodes' span
             lo, hi = 2 * c[2] + 6 * c[3] * t[idx[:, 0]], 2 * c[2] + 6 * c[3] * t[idx[:, -1]]
             assert np.all((value >= np.minimum(lo, hi) - 1e-6) & (value <= np.maximum(lo, hi)
                                                                   + 1e-6))
         else:
             assert np.allclose(value, exact, rtol=1e-6)
-        bumped, _ = _derivative_estimate(t, s + rng.uniform(-1e-4, 1e-4, t.size), e, idx)
+        bumped, _ = derivative_estimate(t, s + rng.uniform(-1e-4, 1e-4, t.size), e, idx)
         assert np.all(np.abs(bumped - value) <= noise * (1 + 1e-9))
 
 
@@ -160,8 +161,9 @@ def test_check_passes_on_correct_conversions(converted, name: str, profile: str)
     assert report.ok, "\n".join(map(str, report.violations))
     measured = {m.name: m for m in report.measures}
     assert set(measured) == set(CHECKS)
-    for check in ("path-deviation", "chord-error", "segment-time", "feed", "tangential-acc",
-                  "tangential-jerk", "normal-acc", "normal-jerk"):
+    for check in ("path-deviation", "chord-error", "coverage", "segment-time", "feed",
+                  "tangential-acc", "tangential-jerk", "normal-acc", "normal-jerk", "acc-xyz",
+                  "tangential-acc-xyz", "normal-acc-xyz"):
         assert measured[check].n_checked > 0.99 * report.n_moves and measured[check].ratio <= 1
     assert measured["feed"].worst > 0.5 * measured["feed"].limit  # real speeds, not zeros
 
@@ -182,9 +184,10 @@ def test_feed_limit_both_sides_of_the_allowance(converted) -> None:
     assert check_files(source, target, load_machine("paper-table1")).ok
     report = check_files(source, target, load_machine("paper-table1",
                                                       {"max_feed_mm_s": 99.0}))
-    assert violated(report) == {"feed"}
+    assert violated(report) == {"feed", "coverage"}  # the chord, and the arc it spans
+    feed = next(v for v in report.violations if v.check == "feed")
     assert re.fullmatch(r"feed 99\.\d+ mm/s > 99 mm/s \+ 0\.173 mm/s rounding noise",
-                        report.violations[0].message)
+                        feed.message)
 
 
 # ---- check on tampered conversions ------------------------------------------------------

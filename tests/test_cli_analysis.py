@@ -62,14 +62,19 @@ def test_check_passes_a_correct_conversion(butterfly_nc: Path) -> None:
     lines = stdout.splitlines()
     assert lines[0].startswith(f"check {butterfly_nc} against {BUTTERFLY} (machine "
                                "paper-table1): 1 curve(s), ")
-    titles = [line[:31].strip() for line in lines[2:11]]
-    assert titles == ["path deviation", "chord error", "segment time off whole periods",
+    titles = [line[:31].strip() for line in lines[2:18]]
+    assert titles == ["path deviation", "chord error", "curve covered per move",
+                      "least time along the curve", "segment time off whole periods",
                       "multi-period move length", "feed", "tangential acceleration",
                       "tangential jerk", "normal acceleration v^2 kappa",
-                      "normal jerk v^3 kappa^2"]
-    assert all(line.split()[-2] == "0" for line in lines[2:11])  # nothing broken
+                      "normal jerk v^3 kappa^2", "acceleration from positions",
+                      "tangential acc. from positions", "normal acc. from positions",
+                      "corner: acc. from positions", "speed where velocity flips"]
+    assert all(line.split()[-2] == "0" or line.split()[-1] == "0"
+               for line in lines[2:18])  # nothing broken (empty rows end in "0 0")
     assert "source lines, curves, number format, curve ends, G90/G91 and F restore: ok" in lines
     assert "divided differences of the projected arc length over 2 ms, 9 ms" in stdout
+    assert "second divided differences of the written points over 2 ms" in stdout
     assert lines[-1] == "result: OK: 0 violation(s)"
 
 

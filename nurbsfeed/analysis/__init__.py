@@ -4,7 +4,7 @@
 - `compare.compare_file`: the paper's Table 2 on any input: per interpolator the feed fluctuation
   (SPEC §3) and the compiled kernel's time per step.
 - `check.check_files`: verifies a converted program against its source without running the
-  planner; every definition and tolerance is in the comment that opens that module's body.
+  planner; every definition and tolerance is in the comment that opens `check.curve_checks`.
 - `series.run_series`: what `nurbsfeed plot` draws for one interpolated curve.
 - `geometry`: chord errors, arc length and curvature on the true curve, shared by check and plot.
 

@@ -1,0 +1,311 @@
+"""One curve's moves checked against the curve and the machine profile: geometry, coverage,
+timing and kinematics. Every definition and tolerance is in the comment below."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from nurbsfeed.analysis.check.estimates import (
+    acceleration_xyz,
+    baseline_s,
+    derivative_estimate,
+    stencils,
+    turning_rad,
+)
+from nurbsfeed.analysis.check.output_program import Section, decode_moves, round_written
+from nurbsfeed.analysis.check.projection import project_points
+from nurbsfeed.analysis.check.report import Estimation, Findings
+from nurbsfeed.analysis.geometry import arc_length_mm, chord_errors_mm, curvature_1_mm
+from nurbsfeed.geometry import NurbsCurve
+from nurbsfeed.machine import MM_PER_INCH, Machine
+from nurbsfeed.program import CurveBlock
+
+#
+# Reference: only the source's curves and the machine profile; the planner is never run. Each
+# emitted point is mapped back to its curve by projection (`projection.py`): a search that moves
+# forward from the previous point's parameter (so a self-intersecting curve is followed branch by
+# branch), brackets the foot point on g(u) = C'(u).(C(u) - P) and refines it by safeguarded
+# Gauss-Newton; a point it leaves far from the curve is looked for again over the rest of the
+# curve. A point farther than ANCHOR_ROUNDINGS * (r + delta) from the curve does not move the
+# search on, so one bad point does not derail the ones after it.
+#
+# Times: a move covering n periods ends n T after the previous one; n comes from its segment time
+# |dP^| / (F/60) (P^ the written coordinates), which must be a whole number of periods.
+#
+# r = 0.5 10^-d sqrt(3) is the farthest a point rounded to d decimals can be from the true point.
+# The projection keeps only the tangential part of that error: the arc position s_i of a point is
+# known to e_i = r (1 + min(kappa_i r, 1)) (beyond kappa r = 1 the bend is smaller than the
+# rounding, and two feet within 2 r of each other are at most about 2 r apart along the curve).
+# Quantised coordinates make finite differences noisy (at d = 4, T = 1 ms, a per-period second
+# difference has up to 350 mm/s^2 of rounding noise), so derivatives are estimated over baselines
+# of several periods (`estimates.py`), with the noise bound as the allowance. Every allowance is
+# bounded: by its baseline (>= T) and by r; the scalar normal estimates, whose allowance grows
+# with kappa, are left to the vector estimate where their allowance would exceed the limit.
+#
+#   path deviation   |P^_i - C(u_i)| <= r.
+#   chord error      farthest point of the arc C([u_i, u_i+1]) from the written chord <= delta + r
+#                    (each chord end may be r off).
+#   coverage         between consecutive points on the curve (within r), the projected arc
+#                    advance s_j - s_i <= v_m (t_j - t_i) + e_i + e_j: no stretch of the curve is
+#                    skipped (the first point is the curve start, the last its end: see below).
+#   cycle time       sum of the moves' durations from their F words >= the least time any
+#                    schedule needs (`least_time_s`: length over the feed cap span by span, and
+#                    the rest-to-rest trapezoid at A_t), less SEGMENT_TIME_REL_TOL of the sum
+#                    (the F words' own tolerance) and 2 r / v_max.
+#   segment time     t = |dP^| / (F/60) within SEGMENT_TIME_REL_TOL of n T, n = round(t/T) >= 1
+#                    (a move that arrives early or late).
+#   skipped periods  n > 1 only where points rounded onto the previous one were dropped: two such
+#                    points are <= 2r apart and a step grows by at most A_t T^2 per period (its
+#                    second difference is a mean of a), so |dP^| <= 4r + A_t T^2.
+#   period total     the moves' periods add up to the comment's point count - 1: more is a
+#                    violation, one fewer a note (the last point rounds onto the end point), more
+#                    than one fewer a violation (moves missing).
+#   feed             |dP^| / (t_i+1 - t_i), the chord speed of a move (a chord is never longer
+#                    than its arc) <= v_m(u) + 2 r / dt.
+#   tangential a, j  2 f[t0, t1, t2] and 6 f[t0, t1, t2, t3], divided differences of s(t) on
+#                    points about h apart; allowance k! sum_q |w_q| e_q. h is the smallest
+#                    multiple of T that keeps that bound under NOISE_SHARE of the limit for evenly
+#                    spaced points.
+#   normal a, j      v_i^2 kappa_i <= A_n, v_i^3 kappa_i^2 <= J_n, v_i the mean speed over the
+#                    neighbouring points, kappa_i the smallest curvature within e_i of the point;
+#                    allowance from the uncertainty of v_i: rounding noise, J_t dt^2 / 24 (mean vs
+#                    centre value) and A_t |skew| / 2 (uneven neighbours).
+#   acceleration     a^ = 2 P^[t0, t1, t2], the second divided difference of the written points
+#   from positions   on nodes about h apart (h: as for the tangential a, with min(A_t, A_n)): a
+#                    weighted mean of P''(t) = a_t T + v^2 kappa N. It sees what s(t) cannot: a
+#                    corner or a turn-back taken at speed (|dv| ~ v sqrt 2 or 2 v over h).
+#                    Noise: r sum |w_q| (r is a length: it bounds every component).
+#                    acc-xyz / corner: |a^| <= sqrt(A_t^2 + A_n^2) + noise; named a corner where
+#                    the tangent turns more than CORNER_TURN_RAD over the stencil.
+#                    Split on the unit tangent T1 at the middle point, away from corners, where
+#                    the tangent turns by theta over the stencil: |a^.T1| <= A_t + A_n sin(theta) +
+#                    noise, |a^ - (a^.T1) T1| <= A_n + A_t sin(theta) + noise.
+#   reversal         where the mean velocities over the two halves of a stencil point apart
+#                    (v1.v2 < 0), |v2 - v1| >= max(|v1|, |v2|), and v2 - v1 = a^ (t2 - t0) / 2:
+#                    so max(|v1|, |v2|) <= sqrt(A_t^2 + A_n^2) (t2 - t0) / 2 + 2 r / (t1 - t0)
+#                    + 2 r / (t2 - t1).
+#   structure        every non-NURBS source line present, byte-identical and in order; every curve
+#                    once; every X/Y/Z/F value with a decimal point, no negative zero, no F0, no
+#                    zero-length move, F on the first move; G90 ... G91 around the moves of a G91
+#                    block and its F restored; moves for every curve that has a length; the last
+#                    point is the curve end (within r). The first point is the position before the
+#                    block, the curve start (the readers require it; JSON programs rapid there),
+#                    taken as written at d decimals.
+
+SEGMENT_TIME_REL_TOL = 0.005
+ANCHOR_ROUNDINGS = 10.0
+NUMERIC_REL_TOL = 1e-6  # float slack on the exact bounds (coordinates carry ~1e-16 relative error)
+CORNER_TURN_RAD = math.radians(30.0)
+
+
+def feed_cap_mm_s(block: CurveBlock, u: np.ndarray) -> np.ndarray:
+    """The programmed feed in force at each u (a step function of u): (M,) -> (M,); inf where
+    none is programmed."""
+    table = np.concatenate(([np.inf], block.feed_mm_s))
+    return table[np.searchsorted(block.feed_u, u, side="right")]
+
+
+def least_time_s(block: CurveBlock, feed_mm_s: float, acc_mm_s2: float) -> float:
+    """No schedule along the curve from rest to rest is faster: the larger of its length over the
+    feed cap span by programmed span, and the trapezoid from rest to rest at the highest cap and
+    A_t (s'' = a_t, so |s''| <= A_t): L / v + v / A_t, or 2 sqrt(L / A_t) when v is not reached."""
+    curve = block.curve
+    breaks = np.clip(np.concatenate(([curve.u_min], block.feed_u, [curve.u_max])),
+                     curve.u_min, curve.u_max)
+    lengths = np.diff(arc_length_mm(curve, breaks))
+    caps = np.minimum(feed_mm_s, feed_cap_mm_s(block, breaks[:-1]))
+    length, v = float(lengths.sum()), float(caps.max())
+    trapezoid = (length / v + v / acc_mm_s2 if length >= v * v / acc_mm_s2
+                 else 2.0 * math.sqrt(length / acc_mm_s2))
+    return max(float(np.sum(lengths / caps)), trapezoid)
+
+
+def check_section(section: Section, block: CurveBlock, machine: Machine,
+                  findings: Findings) -> None:
+    """Geometry, coverage, timing and kinematics of one curve's moves."""
+    m = machine.in_program_units(block.units)
+    curve = block.curve
+    scale = MM_PER_INCH if block.units == "in" else 1.0
+    period = m.period_s
+    r = 0.5 * 10.0**-m.decimals * math.sqrt(3.0)
+    acc_total = math.hypot(m.max_acc_mm_s2, m.max_normal_acc_mm_s2)
+    h_a = baseline_s(period, 2, r, m.max_acc_mm_s2)
+    h_j = baseline_s(period, 3, r, m.max_jerk_mm_s3)
+    h_x = baseline_s(period, 2, r, min(m.max_acc_mm_s2, m.max_normal_acc_mm_s2))
+    findings.estimation.append(Estimation(section.index, r * scale, h_a, h_j, h_x))
+    if abs(section.period_ms * 1e-3 - period) > 1e-9 * period:
+        findings.add("comment", section.comment_line,
+                     f"the comment announces a {section.period_ms:g} ms period, the machine "
+                     f"profile has {period * 1e3:g} ms: check with the profile used to convert")
+    if section.zero_length or not section.moves:
+        length = float(arc_length_mm(curve, np.array([curve.u_max]))[0])
+        if length > r:
+            findings.add("no-moves", section.comment_line,
+                         f"no move written but the curve is {length * scale:.4g} mm long")
+        return
+
+    axes, feed_words, lines = decode_moves(section, findings)
+    if np.isnan(feed_words[0]):
+        findings.add("feed-word", int(lines[0]), "the first move has no F word (it would run at "
+                     "the program's modal feed)")
+    pos = np.empty((len(lines) + 1, 3))
+    pos[0] = round_written(curve.points[0], m.decimals)
+    for k in range(len(lines)):
+        pos[k + 1] = np.where(np.isnan(axes[k]), pos[k], axes[k])
+    feed_mm_min = feed_words.copy()
+    for k in range(1, feed_mm_min.size):
+        if np.isnan(feed_mm_min[k]):
+            feed_mm_min[k] = feed_mm_min[k - 1]
+    step_mm = np.linalg.norm(np.diff(pos, axis=0), axis=1)
+    for k in np.flatnonzero(step_mm == 0.0):
+        findings.add("zero-length", int(lines[k]), "move does not move (same point as the "
+                     "one before, as written)")
+
+    t_s = _check_timing(section, block, m, r, step_mm, feed_mm_min, lines, findings, scale)
+    point_lines = np.concatenate([[section.comment_line], lines])
+
+    # ---- geometry: project every point, deviation, ends, chord error, coverage ----
+    u, dist = project_points(curve, pos, 2.0 * r, ANCHOR_ROUNDINGS * (r + m.chord_error_mm))
+    dev_allow = r * (1.0 + NUMERIC_REL_TOL)
+    findings.measure("path-deviation", dist[1:], 0.0, dev_allow, lines, scale)
+    end_gap = float(np.linalg.norm(pos[-1] - curve.points[-1]))
+    if end_gap > dev_allow:
+        findings.add("end-point", int(lines[-1]),
+                     f"the last point is {end_gap * scale:.4g} mm from the curve end "
+                     f"{_xyz(curve.points[-1])} (rounding allows {r * scale:.4g} mm)")
+    good = dist <= dev_allow
+    pair = good[:-1] & good[1:]
+    err = chord_errors_mm(curve, u[:-1][pair], u[1:][pair], pos[:-1][pair], pos[1:][pair])
+    findings.measure("chord-error", err, m.chord_error_mm, r * (1.0 + NUMERIC_REL_TOL),
+                     lines[pair], scale)
+    cap = np.minimum(m.max_feed_mm_s, np.maximum(feed_cap_mm_s(block, u[:-1]),
+                                                 feed_cap_mm_s(block, u[1:])))
+    dt = np.diff(t_s)
+    findings.measure("feed", step_mm / dt, cap, 2.0 * r / dt, lines, scale)
+
+    ug, tg, pl = u[good], t_s[good], point_lines[good]
+    if ug.size >= 2:
+        kappa = curvature_1_mm(curve, ug)
+        e = r * (1.0 + np.minimum(kappa * r, 1.0))
+        s = arc_length_mm(curve, ug)
+        cap_g = np.minimum(m.max_feed_mm_s, np.maximum(feed_cap_mm_s(block, ug[:-1]),
+                                                       feed_cap_mm_s(block, ug[1:])))
+        findings.measure("coverage", np.diff(s), cap_g * np.diff(tg), e[:-1] + e[1:], pl[1:],
+                         scale)
+        _check_arc_kinematics(curve, m, ug, tg, pl, s, e, kappa, h_a, h_j, findings, scale)
+    _check_xyz_kinematics(curve, m, pos, t_s, u, point_lines, r, acc_total, h_x, findings, scale)
+
+
+def _check_timing(section: Section, block: CurveBlock, m: Machine, r: float,
+                  step_mm: np.ndarray, feed_mm_min: np.ndarray, lines: np.ndarray,
+                  findings: Findings, scale: float) -> np.ndarray:
+    """Segment times, multi-period moves, period total and cycle time; returns the time of every
+    point (M+1,) on the period grid."""
+    period = m.period_s
+    with np.errstate(divide="ignore", invalid="ignore"):
+        seconds = step_mm / (feed_mm_min / 60.0)
+    usable = np.isfinite(seconds) & (seconds > 0.0)
+    n_periods = np.where(usable, np.maximum(1, np.rint(seconds / period)), 1).astype(np.int64)
+    off_pct = np.where(usable, 100.0 * np.abs(seconds - n_periods * period)
+                       / (n_periods * period), 0.0)
+    findings.measure("segment-time", off_pct[usable], 100.0 * SEGMENT_TIME_REL_TOL, 0.0,
+                     lines[usable])
+    multi = n_periods > 1
+    findings.measure("skipped-periods", step_mm[multi], 4.0 * r + m.max_acc_mm_s2 * period**2,
+                     0.0, lines[multi], scale)
+    total = int(n_periods.sum())
+    announced = section.n_points - 1
+    if total > announced:
+        findings.add("period-total", int(lines[-1]),
+                     f"the moves cover {total} periods, the comment announces "
+                     f"{section.n_points} points ({announced} periods)")
+    elif total < announced - 1:
+        findings.add("period-total", int(lines[-1]),
+                     f"the moves cover {total} periods, the comment announces "
+                     f"{section.n_points} points ({announced} periods): moves are missing")
+    elif total < announced:
+        findings.notes.append(f"curve {section.index}: the moves cover {total} of the "
+                              f"{announced} announced periods: the last point rounds onto the "
+                              f"end point and is not written")
+    written_s = float(np.sum(seconds[usable]))
+    least_s = least_time_s(block, m.max_feed_mm_s, m.max_acc_mm_s2)
+    findings.measure("cycle-time", least_s, written_s,
+                     SEGMENT_TIME_REL_TOL * written_s + 2.0 * r / m.max_feed_mm_s,
+                     int(lines[-1]))
+    return period * np.concatenate([[0], np.cumsum(n_periods)])
+
+
+def _check_arc_kinematics(curve: NurbsCurve, m: Machine, ug: np.ndarray, tg: np.ndarray,
+                          pl: np.ndarray, s: np.ndarray, e: np.ndarray, kappa: np.ndarray,
+                          h_a: float, h_j: float, findings: Findings, scale: float) -> None:
+    """Tangential a, j and normal a, j from the projected arc lengths s(t) (G,) of the points
+    that lie on the curve."""
+    for name, order, h, limit in (("tangential-acc", 2, h_a, m.max_acc_mm_s2),
+                                  ("tangential-jerk", 3, h_j, m.max_jerk_mm_s3)):
+        idx = stencils(tg, order, h)
+        value, noise = derivative_estimate(tg, s, e, idx)
+        findings.measure(name, np.abs(value), limit, noise * (1.0 + NUMERIC_REL_TOL),
+                         pl[idx[:, 1]], scale)
+
+    # speed at each point: mean over its neighbours (one-sided at the ends)
+    before = np.concatenate([[0], np.arange(ug.size - 1)])
+    after = np.concatenate([np.arange(1, ug.size), [ug.size - 1]])
+    span_s = tg[after] - tg[before]
+    v = np.abs(s[after] - s[before]) / span_s
+    skew = np.abs(tg[after] + tg[before] - 2.0 * tg)
+    e_v = ((e[after] + e[before]) / span_s + m.max_jerk_mm_s3 * span_s**2 / 24.0
+           + m.max_acc_mm_s2 * skew / 2.0)
+    du = e / np.maximum(curve.speed(ug), 1e-300)
+    k_low = np.minimum(kappa, np.minimum(curvature_1_mm(curve, np.maximum(ug - du, curve.u_min)),
+                                         curvature_1_mm(curve, np.minimum(ug + du, curve.u_max))))
+    for name, power, limit in (("normal-acc", 2, m.max_normal_acc_mm_s2),
+                               ("normal-jerk", 3, m.max_normal_jerk_mm_s3)):
+        kk = k_low ** (power - 1)
+        value = v**power * kk
+        allowance = ((v + e_v) ** power - v**power) * kk * (1.0 + NUMERIC_REL_TOL)
+        informative = allowance <= limit  # elsewhere the vector estimate stands in
+        findings.measure(name, value[informative], limit, allowance[informative],
+                         pl[informative], scale)
+
+
+def _check_xyz_kinematics(curve: NurbsCurve, m: Machine, pos: np.ndarray, t_s: np.ndarray,
+                          u: np.ndarray, point_lines: np.ndarray, r: float, acc_total: float,
+                          h_x: float, findings: Findings, scale: float) -> None:
+    """Acceleration vectors from the written points (N, 3): total, corner, split on the
+    tangent, and reversals."""
+    idx = stencils(t_s, 2, h_x)
+    if idx.size == 0:
+        return
+    acc, noise = acceleration_xyz(t_s, pos, r, idx)
+    noise = noise * (1.0 + NUMERIC_REL_TOL)
+    line = point_lines[idx[:, 1]]
+    size = np.linalg.norm(acc, axis=1)
+    tangent, theta = turning_rad(curve, u[idx[:, 0]], u[idx[:, 1]], u[idx[:, 2]])
+    corner = theta > CORNER_TURN_RAD
+    findings.measure("acc-xyz", size[~corner], acc_total, noise[~corner], line[~corner], scale)
+    findings.measure("corner", size[corner], acc_total, noise[corner], line[corner], scale)
+
+    split = ~np.isnan(tangent[:, 0]) & ~corner  # at a corner the split says nothing more
+    along = np.sum(acc[split] * tangent[split], axis=1)
+    across = np.linalg.norm(acc[split] - along[:, None] * tangent[split], axis=1)
+    sin_turn = np.sin(np.minimum(theta[split], 0.5 * np.pi))
+    findings.measure("tangential-acc-xyz", np.abs(along), m.max_acc_mm_s2,
+                     m.max_normal_acc_mm_s2 * sin_turn + noise[split], line[split], scale)
+    findings.measure("normal-acc-xyz", across, m.max_normal_acc_mm_s2,
+                     m.max_acc_mm_s2 * sin_turn + noise[split], line[split], scale)
+
+    t = t_s[idx]
+    d1, d2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 1]
+    v1 = (pos[idx[:, 1]] - pos[idx[:, 0]]) / d1[:, None]
+    v2 = (pos[idx[:, 2]] - pos[idx[:, 1]]) / d2[:, None]
+    flip = np.sum(v1 * v2, axis=1) < 0.0
+    speed = np.maximum(np.linalg.norm(v1, axis=1), np.linalg.norm(v2, axis=1))
+    findings.measure("reversal", speed[flip], acc_total * (t[flip, 2] - t[flip, 0]) / 2.0,
+                     (2.0 * r / d1[flip] + 2.0 * r / d2[flip]) * (1.0 + NUMERIC_REL_TOL),
+                     line[flip], scale)
+
+
+def _xyz(p: np.ndarray) -> str:
+    return "(" + ", ".join(f"{c:.6g}" for c in p) + ")"

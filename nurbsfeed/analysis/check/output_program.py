@@ -1,0 +1,173 @@
+"""The two programs as `check` reads them: the source as tokens (pass-through lines and curves),
+the output as tokens plus one Section of moves per curve, and the moves' words decoded."""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from nurbsfeed.analysis.check.report import Findings
+from nurbsfeed.machine import Machine
+from nurbsfeed.pipeline import read_program
+from nurbsfeed.program import CurveBlock, PassThrough
+
+COMMENT_RE = re.compile(r"\(nurbsfeed: curve (\d+) (.*), (\d+) points, period ([0-9.eE+-]+) ms, "
+                        r"(\w+), length ([0-9.]+) (mm|in), planned cycle ([0-9.]+) s\)$")
+ZERO_LENGTH_LINE = "(nurbsfeed: zero-length curve, no move written)"  # pipeline.convert_block
+MOVE_LINE_RE = re.compile(r"(?:G0*1(?![0-9.])\s*)?(?:[XYZF]\s*[-+]?[0-9.]*\s*)+")
+WORD_RE = re.compile(r"([A-Z])\s*([-+]?[0-9.]*)")
+G90_G91_MESSAGE = ("the moves of a G91 block must be bracketed by G90 and G91 lines (the "
+                   "moves are absolute)")
+
+Token = tuple[str, Any]  # ("line", text with its ending) or ("curve", index)
+
+
+@dataclass
+class Section:
+    """The lines that replaced one curve in the output."""
+
+    index: int
+    comment_line: int  # 1-based
+    n_points: int
+    period_ms: float
+    zero_length: bool
+    moves: list[tuple[int, str]] = field(default_factory=list)  # (line number, text)
+
+
+def split_lines(text: str) -> list[str]:
+    """Lines with their endings ("\\r\\n" stays with its line)."""
+    parts = text.split("\n")
+    lines = [part + "\n" for part in parts[:-1]]
+    if parts[-1]:
+        lines.append(parts[-1])
+    return lines
+
+
+def body(line: str) -> str:
+    return line.rstrip("\r\n")
+
+
+def round_written(x: np.ndarray, decimals: int) -> np.ndarray:
+    """Coordinates as the writer rounds them: half away from zero, at `decimals`."""
+    scale = 10.0**decimals
+    return np.sign(x) * np.floor(np.abs(x) * scale + 0.5) / scale
+
+
+def source_tokens(path: Path, text: str, machine: Machine, dialect: str
+                  ) -> tuple[list[Token], list[CurveBlock], dict[int, list[str]]]:
+    """Source -> tokens, curve blocks, and the pass-through lines that follow each curve."""
+    tokens: list[Token] = []
+    blocks: list[CurveBlock] = []
+    following: dict[int, list[str]] = {}
+    for item in read_program(path, text, dialect, machine.decimals):
+        if isinstance(item, PassThrough):
+            for line in split_lines(item.text):
+                tokens.append(("line", line))
+                if blocks:
+                    following[len(blocks) - 1].append(line)
+        else:
+            tokens.append(("curve", len(blocks)))
+            following[len(blocks)] = []
+            blocks.append(item)
+    return tokens, blocks, following
+
+
+def parse_output(lines: list[str], blocks: list[CurveBlock], following: dict[int, list[str]],
+                 findings: Findings) -> tuple[list[Token], list[int], list[Section]]:
+    """Output lines -> tokens, their line numbers, and the curve sections. A section is a
+    nurbsfeed comment line and the moves after it."""
+    tokens: list[Token] = []
+    token_lines: list[int] = []
+    sections = []
+    i = 0
+    while i < len(lines):
+        match = COMMENT_RE.match(body(lines[i]))
+        if match is None:
+            tokens.append(("line", lines[i]))
+            token_lines.append(i + 1)
+            i += 1
+            continue
+        index = int(match[1])
+        section = Section(index, i + 1, int(match[3]), float(match[4]), False)
+        tokens.append(("curve", index))
+        token_lines.append(i + 1)
+        sections.append(section)
+        block = blocks[index] if index < len(blocks) else None
+        i = _parse_section(lines, i + 1, section, block, following.get(index, []), findings)
+    return tokens, token_lines, sections
+
+
+def _parse_section(lines: list[str], i: int, section: Section, block: CurveBlock | None,
+                   after: list[str], findings: Findings) -> int:
+    """Read the moves of one section from line index i; return the index after the section."""
+    if i < len(lines) and body(lines[i]) == ZERO_LENGTH_LINE:
+        section.zero_length = True
+        return i + 1
+    incremental = block is not None and block.incremental
+    restore = (block.feed_word_after + block.eol
+               if block is not None and block.feed_word_after else None)
+    if incremental:
+        if i < len(lines) and body(lines[i]) == "G90":
+            i += 1
+        else:
+            findings.add("g90-g91", i + 1, G90_G91_MESSAGE)
+    first = i
+    while i < len(lines) and MOVE_LINE_RE.fullmatch(body(lines[i])):
+        i += 1
+    if not incremental:
+        # a bare F or coordinate line after the block (its F restore, or the program's next
+        # lines) looks like a move: give back the trailing lines that are exactly those
+        expected = ([restore] if restore else []) + after
+        for k in range(min(len(expected), i - first), 0, -1):
+            if lines[i - k:i] == expected[:k]:
+                i -= k
+                break
+    section.moves = [(n + 1, lines[n]) for n in range(first, i)]
+    if incremental:
+        if i < len(lines) and body(lines[i]) == "G91":
+            i += 1
+        else:
+            findings.add("g90-g91", i + 1, G90_G91_MESSAGE)
+    if restore is not None:
+        if i < len(lines) and lines[i] == restore:
+            i += 1
+        else:
+            findings.add("feed-restore", i + 1, f"the program's feed must be restored after the "
+                         f"moves with the line {restore.strip()!r}")
+    return i
+
+
+def decode_moves(section: Section, findings: Findings
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Decode the moves: X/Y/Z words (M, 3) as NaN where not written, F (M,) (NaN: modal), line
+    numbers (M,); number-format violations are recorded on the way."""
+    m = len(section.moves)
+    axes = np.full((m, 3), np.nan)
+    feed = np.full(m, np.nan)
+    lines = np.array([line for line, _ in section.moves], dtype=np.int64)
+    for k, (line, text) in enumerate(section.moves):
+        for letter, value in WORD_RE.findall(body(text)):
+            if letter == "G":
+                continue
+            if "." not in value:
+                findings.add("decimal-point", line, f"{letter}{value} has no decimal point "
+                             f"(write {letter}{value or '0'}.)")
+            try:
+                number = float(value)
+            except ValueError:
+                findings.add("number", line, f"{letter}{value} is not a number")
+                continue
+            if number == 0.0 and value.startswith("-"):
+                findings.add("negative-zero", line, f"{letter}{value} is a negative zero "
+                             f"(write {letter}0.)")
+            if letter == "F":
+                if number <= 0.0:
+                    findings.add("zero-feed", line, f"F{value}: a G1 move needs a positive feed")
+                feed[k] = number
+            else:
+                axes[k, "XYZ".index(letter)] = number
+    return axes, feed, lines
