@@ -20,6 +20,9 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
+from click.testing import CliRunner
+
+from nurbsfeed.cli import main
 from nurbsfeed.gcode.writer import MoveWriter
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.interpolate import interpolate
@@ -117,6 +120,19 @@ def test_degenerate_case(name: str) -> None:
         assert_rests_at(result.points, result.u, curve, stop_u)
     # the path is followed: no step longer than the feed allows (the collapse wrote one G1)
     assert result.n_points >= plan.length_mm / (plan.limits.feed_mm_s * plan.limits.period_s)
+
+
+@pytest.mark.parametrize("name", sorted(EXPECTED))
+def test_plan_names_the_stops(name: str) -> None:
+    """`nurbsfeed plan` lists each stop by kind, and its time-optimal bound is finite even
+    across a zero-length span (warnings are errors in the tests)."""
+    result = CliRunner().invoke(main, ["plan", str(CASES / f"{name}.json")],
+                                catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+    rows = [line.split() for line in result.output.splitlines() if line[:6].strip().isdigit()]
+    kinds = [row[1] for row in rows if row[1] in ("corner", "cusp")]
+    assert kinds == [kind for _, kind in EXPECTED[name][0]]
+    assert "time-optimal bound" in result.output and "nan" not in result.output
 
 
 def test_removable_zero_is_passed_at_speed() -> None:

@@ -33,7 +33,11 @@ def time_optimal_bound_s(plan: Plan) -> float:
     for i in range(v2.size - 2, -1, -1):
         v2[i] = min(v2[i], v2[i + 1] + two_a * ds[i])
     v = np.sqrt(v2)
-    return float(np.sum(2.0 * ds / (v[:-1] + v[1:])))
+    # between two nodes at rest (a stop beside a stop) v^2 cannot grow on the grid: the
+    # fastest way over ds from rest to rest is to accelerate half of it, 2 sqrt(ds / A)
+    both = v[:-1] + v[1:]
+    return float(np.sum(np.where(both > 0.0, 2.0 * ds / np.where(both > 0.0, both, 1.0),
+                                 2.0 * np.sqrt(ds / lim.acc_mm_s2))))
 
 
 def curve_blocks(path: Path, machine: Machine, dialect: str = "auto") -> list[CurveBlock]:
