@@ -26,7 +26,7 @@ class PassThrough:
 class CurveBlock:
     """One NURBS curve of the program and the modal state it is executed in.
 
-    feed_u / feed_mm_s: the programmed feed as a step function of u (SPEC §3a: an F word on a
+    feed_u / feed_mm_s: the programmed feed as a step function of u (design §3a: an F word on a
     Fanuc control point j caps the spans from j on). feed_u[0] == curve.u_min; feed_mm_s is in
     program units per second, inf where no feed was programmed. Empty arrays mean "no cap".
     """

@@ -33,9 +33,9 @@ GUARD_ABS_MM = 1e-9
 
 @jit
 def _first_wild(points, before, max_step_mm, max_turn_mm):
-    """The first k of points (N, 3), after the points `before` (2, 3: the last but one, the last; NaN: none), whose
-    move or second difference breaks its bound, and what broke (0 none, 1 not finite, 2 step,
-    3 second difference) with its size."""
+    """The first k of points (N, 3), after the points `before` (2, 3: the last but one, the
+    last; NaN: none), whose move or second difference breaks its bound, and what broke (0 none,
+    1 not finite, 2 step, 3 second difference) with its size."""
     px, py, pz = before[1, 0], before[1, 1], before[1, 2]
     qx, qy, qz = before[0, 0], before[0, 1], before[0, 2]
     for k in range(points.shape[0]):

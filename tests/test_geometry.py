@@ -163,7 +163,7 @@ def test_span_polynomials_match_the_oracle_at_knots_and_extrapolate_smoothly(see
 
 
 def test_a_repeated_end_control_point_gives_c_prime_exactly_zero() -> None:
-    """SPEC §3a: C'(u) = 0 where control points repeat, exactly, so that the grid sees it."""
+    """design §3a: C'(u) = 0 where control points repeat, exactly, so that the grid sees it."""
     knots = [0, 0, 0, 0, 0.4, 1, 1, 1, 1]
     curve = NurbsCurve.build(3, knots, [[0, 0], [0, 0], [20, 10], [40, -5], [60, 0]])
     _, c1, _ = curve.derivatives(np.array([curve.u_min]))

@@ -1,4 +1,4 @@
-"""G1 output rules (SPEC §5): decimal points, no -0., no zero moves, F from written coordinates."""
+"""G1 output rules (design §5): decimal points, no -0., no zero moves, F from written coordinates."""
 
 from __future__ import annotations
 
@@ -112,7 +112,7 @@ def test_chunked_writing_equals_one_shot_writing() -> None:
 
 def reference_moves(points: np.ndarray, start: np.ndarray, decimals: int, feed_decimals: int,
                     period_s: float, eol: str) -> str:
-    """SPEC §5 written out plainly, one point at a time, with Python's own formatting."""
+    """design §5 written out plainly, one point at a time, with Python's own formatting."""
     def ticks(x: float) -> int:
         scaled = x * 10.0**decimals
         return int(math.copysign(math.floor(abs(scaled) + 0.5), scaled))

@@ -2,7 +2,7 @@
 
 - `common.time_optimal_bound_s`: a lower bound on any schedule's cycle time (used by `plan`).
 - `compare.compare_file`: the paper's Table 2 on any input: per interpolator the feed fluctuation
-  (SPEC §3) and the compiled kernel's time per step.
+  (design §3) and the compiled kernel's time per step.
 - `check.check_files`: verifies a converted program against its source without running the
   planner; every definition and tolerance is in the comment that opens `check.curve_checks`.
 - `series.run_series`: what `nurbsfeed plot` draws for one interpolated curve.

@@ -1,5 +1,5 @@
 """`nurbsfeed compare`: the paper's Table 2 on any input: per interpolator the feed fluctuation
-(SPEC §3) and the compiled kernel's time per step."""
+(design §3) and the compiled kernel's time per step."""
 
 from __future__ import annotations
 
@@ -116,8 +116,8 @@ def render_comparison(c: Comparison, machine_name: str) -> str:
         lines.append(f"{r.method:<8} {r.max_ff_pct:>11.4g} {r.mean_ff_pct:>11.4g} "
                      f"{r.n_points:>9,} {r.us_per_step:>8.3f}   {r.paper_max_ff_pct:>14g} "
                      f"{r.paper_us_per_step:>13g}")
-    lines.append("FF = | |C(u_k+1) - C(u_k)| - ds_k | / ds_k over every period (SPEC §3); "
-                 f"us/step: median of {c.repeat} compiled kernel runs")
+    lines.append("FF = | |C(u_k+1) - C(u_k)| - ds_k | / ds_k over every period "
+                 f"(docs/design.md §3); us/step: median of {c.repeat} compiled kernel runs")
     lines.append("paper: butterfly, Table 1 limits, MATLAB (Wei et al. 2022, Table 2)")
     if c.n_curves > 1:
         lines.append(f"aggregated over {c.n_curves} curves: {AGGREGATE_NOTE}")

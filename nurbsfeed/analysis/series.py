@@ -34,7 +34,7 @@ class RunSeries:
     tangential_jerk_mm_s3: np.ndarray  # (N+1,)
     normal_jerk_mm_s3: np.ndarray  # (N+1,) v^3 kappa^2
     chord_error_mm: np.ndarray  # (N,) on the true curve, unrounded points
-    feed_fluctuation_pct: np.ndarray  # (N,) SPEC §3; NaN where the target step is 0
+    feed_fluctuation_pct: np.ndarray  # (N,) design §3; NaN where the target step is 0
     key_points: np.ndarray  # (K, 3) the plan's key points
     key_kind: np.ndarray  # (K,)
 

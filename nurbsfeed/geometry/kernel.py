@@ -11,7 +11,7 @@ value and its derivatives, then the quotient rule (A4.2): C = A/W, C' = (A' - W'
 C'' = (A'' - 2W'C' - W''C)/W (`point_d1`, `point_d2`). That costs a third of evaluating the basis
 functions at every parameter, which the stepping loop and the planning grid do millions of times.
 Two expansions, not one: |t| stays below half the span, and at every knot the value is the one
-A2.3 gives there, so a derivative that vanishes at a knot (a repeated control point, SPEC §3a)
+A2.3 gives there, so a derivative that vanishes at a knot (a repeated control point, design §3a)
 comes out exactly 0, not as rounding noise. Outside [u_min, u_max] the end spans' polynomials
 extrapolate, which keeps the end-landing search of `interpolate` continuous.
 

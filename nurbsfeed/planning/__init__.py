@@ -1,1 +1,1 @@
-"""Feedrate planning (SPEC §2): key points, S-curves, bidirectional scan, time law."""
+"""Feedrate planning (design §2): key points, S-curves, bidirectional scan, time law."""

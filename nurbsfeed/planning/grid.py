@@ -15,7 +15,8 @@ Building it, in order (`_grid_nodes`, one compiled call; then `simpson_lengths`)
    a. corners at knots of multiplicity >= degree, where the unit tangent jumps (`_corners`);
    b. zeros of C' (a control point repeated, a cusp, a path that turns back on itself), found
       as local minima of |C'| on the samples refined by Gauss-Newton, and at every knot from
-      both sides (`_stops`). A zero is classified by the one-sided tangents, taken as chords from it:
+      both sides (`_stops`). A zero is classified by the one-sided tangents, taken as chords
+      from it:
         - they differ (a corner) or are opposite (a cusp, a reversal): a stop;
         - they agree, but kappa grows without bound towards the zero: a stop (v^2 kappa would
           be unbounded at any speed above 0);
@@ -150,7 +151,7 @@ def _samples(knots, coef, degree, breaks, spacing_mm):
 def _fill_singular(kappa):
     """Where C' = 0 (repeated control points) kappa is NaN (or overflows): use the next finite
     value along the curve (the last one past the final finite node), the limit of kappa from
-    inside the curve (SPEC §3a). None finite: 0. In place."""
+    inside the curve (design §3a). None finite: 0. In place."""
     last_good = -1
     for q in range(kappa.size - 1, -1, -1):
         if math.isfinite(kappa[q]):

@@ -1,5 +1,5 @@
 """Plan one curve: key points, nominal speeds, bidirectional scan, S-curve segments, limits
-everywhere, whole periods (SPEC §2).
+everywhere, whole periods (design §2).
 
 1. Grid: nodes <= 2 v_m T apart with arc length and curvature (planning.grid).
 2. Key points: both ends (speed 0), every curvature maximum with kappa >= kappa_0 (nominal speed

@@ -1,4 +1,4 @@
-r"""Jerk-limited speed transitions (paper Eq. 17-20, errata in SPEC §2), the bidirectional scan
+r"""Jerk-limited speed transitions (paper Eq. 17-20, errata in design §2), the bidirectional scan
 (Eq. 22) and segment peak speeds. Scalar functions in numba's subset (see nurbsfeed.jit).
 
 A transition changes speed by dv with zero acceleration at both ends:
