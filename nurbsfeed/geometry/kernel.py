@@ -287,7 +287,8 @@ def curvature(x1, y1, z1, x2, y2, z2):
     cross = math.sqrt((y1 * z2 - z1 * y2) ** 2 + (z1 * x2 - x1 * z2) ** 2
                       + (x1 * y2 - y1 * x2) ** 2)
     speed = math.sqrt(x1 * x1 + y1 * y1 + z1 * z1)
-    kappa = cross / speed**3 if speed > 0.0 else math.nan
+    cube = speed * speed * speed  # underflows to 0 below ~1e-103 even where speed > 0
+    kappa = cross / cube if cube > 0.0 else math.nan
     return kappa, speed
 
 

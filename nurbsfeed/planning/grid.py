@@ -360,9 +360,12 @@ def _corners(knots, coef, degree, breaks, floor_mm):
         _, _, _, lx, ly, lz = point_d1(knots, coef, degree, span, knot - eps)
         span = find_span(knots, degree, n_ctrl, knot + eps, span)
         _, _, _, rx, ry, rz = point_d1(knots, coef, degree, span, knot + eps)
-        norm_l = max(math.sqrt(lx * lx + ly * ly + lz * lz), 1e-300)
-        norm_r = max(math.sqrt(rx * rx + ry * ry + rz * rz), 1e-300)
-        cos = (lx * rx + ly * ry + lz * rz) / (norm_l * norm_r)
+        norm_l = math.sqrt(lx * lx + ly * ly + lz * lz)
+        norm_r = math.sqrt(rx * rx + ry * ry + rz * rz)
+        if norm_l == 0.0 or norm_r == 0.0:  # C' = 0 beside the knot: `_stops` decides
+            continue
+        cos = (lx / norm_l) * (rx / norm_r) + (ly / norm_l) * (ry / norm_r) + (
+            lz / norm_l) * (rz / norm_r)
         if cos < 1.0 - CORNER_COS_TOL:
             out[n] = knot
             n += 1
