@@ -2,8 +2,9 @@
 
 The program is streamed item by item: pass-through lines are copied as bytes, each curve block
 is planned, then stepped and written as G1 moves chunk by chunk before the next item is read, so
-memory holds one chunk of one curve at a time whatever the output size or the curve's duration. Output files are written to a temporary file beside the
-target and renamed into place only when the whole conversion succeeded.
+memory holds one chunk of one curve at a time whatever the output size or the curve's duration.
+Output files are written to a temporary file beside the target and renamed into place only when
+the whole conversion succeeded.
 """
 
 from __future__ import annotations
