@@ -1,4 +1,4 @@
-"""The real-time stage (SPEC §3): from the time law's per-period targets to curve parameters.
+"""The real-time stage (design §3): from the time law's per-period targets to curve parameters.
 
 All three methods consume the same targets ds_k = s(t_{k+1}) - s(t_k), t_k = k T:
   taylor1  u+ = u + ds / |C'(u)|
@@ -9,7 +9,7 @@ All three methods consume the same targets ds_k = s(t_{k+1}) - s(t_k), t_k = k T
            c2 = 2 C'(u~).(C(u~) - C(u)), c3 = |C(u~) - C(u)|^2 - ds^2. The root near zero,
            (-c2 + sqrt(disc)) / (2 c1), is computed as -2 c3 / (c2 + sqrt(disc)) (same root, no
            cancellation); du = 0 when disc < 0 (the paper's rule).
-Where |C'(u)| vanishes (repeated control points, SPEC §3a) a step solves the chord equation
+Where |C'(u)| vanishes (repeated control points, design §3a) a step solves the chord equation
 |C(u + du) - C(u)| = ds directly instead of dividing by |C'|; rk2c and rk4 also do so when |C'|
 changes by more than a quarter within the step, which only happens right next to such a point.
 
@@ -34,12 +34,22 @@ floor of the stepping where that is coarser (but at most LANDING_REL_MAX), or wh
 stops them improving (then the best run stands).
 Where the plan rests inside the curve (a corner), each stretch between rests is stepped and
 landed on its own, so a point falls exactly on the corner.
+
+Memory is bounded whatever the curve's duration (`Stepping`, `_Stretch`): a stretch is sampled
+and stepped CHUNK_PERIODS periods at a time. The landing needs of a run only its last point (and
+u where the bump starts), so a stretch longer than a chunk samples its targets from the law again
+for every run, at t_k from the integer k (never by summing periods), and once sigma and the bump
+are decided steps a last time, handing its points on chunk by chunk. A run carries only u from
+one chunk to the next, and the sums over the targets are taken in order, so the points are the
+same to the last bit however the stretch is chunked. A stretch within one chunk (the common
+case) is sampled once and its last run is what is handed on.
 """
 
 from __future__ import annotations
 
 import math
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -48,9 +58,10 @@ import numpy as np
 from nurbsfeed.geometry.kernel import find_span, point_d1, span_polynomials
 from nurbsfeed.jit import jit
 from nurbsfeed.planning.planner import Plan
-from nurbsfeed.planning.timelaw import evaluate
+from nurbsfeed.planning.timelaw import TimeLaw, evaluate
 
 METHODS = {"taylor1": 0, "rk4": 1, "rk2c": 2}
+CHUNK_PERIODS = 65536  # periods of a stretch sampled, stepped or held in memory at a time
 SLOW_SPEED_REL = 1e-3  # |C'| below this fraction of the mean |C'| is treated as "zero"
 # rk2c / rk4: when |C'| changes by more than this fraction across one step, the step is next to
 # a point where C' = 0 and the Taylor-based update is not valid there: solve the chord instead.
@@ -187,6 +198,203 @@ def step_curve(method, knots, cw, degree, n_spans, u0, ds, sigma, slow_speed, u_
                sigma, slow_speed, u_out, p_out)
 
 
+@jit
+def _plan_time(t_a, t_b, n, k):
+    """Plan time of period k of a stretch of n periods from t_a to t_b: t_a + k (t_b - t_a) / n,
+    t_b exactly at k = n. From the integer k, never by summing periods."""
+    if k == n:
+        return t_b
+    return t_a + k * ((t_b - t_a) / n)
+
+
+@jit
+def _plan_times(t_a, t_b, n, lo, hi):
+    """`_plan_time` of periods lo .. hi - 1: (hi - lo,)."""
+    t = np.empty(hi - lo)
+    for k in range(lo, hi):
+        t[k - lo] = _plan_time(t_a, t_b, n, k)
+    return t
+
+
+@jit
+def _first_period_at(t_a, t_b, n, x, right):
+    """np.searchsorted over a stretch's plan times (n+1,), which are never stored: the first
+    period k with t_k >= x (t_k > x if right), by bisection."""
+    lo = 0
+    hi = n + 1
+    while lo < hi:
+        mid = (lo + hi) // 2
+        t = _plan_time(t_a, t_b, n, mid)
+        if t < x or (right and t == x):
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@jit
+def _sample_targets(t0, s0, v0, a0, jk, t_a, t_b, n, lo, ds, grid_s, grid_kappa, with_drift,
+                    node, drift, total, carry):
+    """The targets ds_k = s(t_k+1) - s(t_k) of periods lo .. lo + M - 1 of a stretch of n periods
+    from plan time t_a to t_b (`_plan_time`) into ds (M,), and the running sums over a stretch
+    sampled chunk by chunk in order: returns them (node, drift, total, carry) updated.
+
+    ds_k is taken piece by piece (the pieces' starts s0 differ, then the arcs within them), so
+    that a tiny step far along the curve keeps its relative precision. total + carry is the
+    targets' sum, compensated (Neumaier) and added in order, so that it does not depend on how
+    the stretch is chunked. If with_drift, drift accumulates 24 times how far rk2c's arc position
+    will run ahead of the targets: sum(min(kappa ds, 2)^2 ds), the arc minus the chord of a
+    circular arc of curvature kappa per step, with kappa at the middle of each step interpolated
+    linearly on the grid (grid_s, grid_kappa (G,); node: the grid interval reached so far);
+    beside a corner (kappa infinite) from its finite side.
+    """
+    m = ds.size
+    t_plan = _plan_times(t_a, t_b, n, lo, lo + m + 1)
+    piece = np.empty(m + 1, dtype=np.int64)
+    local = np.empty(m + 1)
+    v = np.empty(m + 1)
+    a = np.empty(m + 1)
+    j = np.empty(m + 1)
+    evaluate(t0, s0, v0, a0, jk, t_plan, piece, local, v, a, j)
+    for k in range(m):
+        ds[k] = (s0[piece[k + 1]] - s0[piece[k]]) + (local[k + 1] - local[k])
+        added = total + ds[k]
+        if abs(total) >= abs(ds[k]):
+            carry += (total - added) + ds[k]
+        else:
+            carry += (ds[k] - added) + total
+        total = added
+    if with_drift:
+        last = grid_s.size - 1
+        for k in range(m):
+            s = s0[piece[k]] + local[k] + 0.5 * ds[k]
+            while node + 1 < last and grid_s[node + 1] <= s:
+                node += 1
+            if s <= grid_s[0]:
+                kappa = grid_kappa[0]
+            elif s >= grid_s[last]:
+                kappa = grid_kappa[last]
+            else:
+                k_lo = grid_kappa[node]
+                k_hi = grid_kappa[node + 1]
+                if math.isinf(k_lo) or math.isinf(k_hi):  # beside a corner: the finite side
+                    kappa = k_hi if math.isinf(k_lo) else k_lo
+                else:
+                    w = (s - grid_s[node]) / (grid_s[node + 1] - grid_s[node])
+                    kappa = k_lo + w * (k_hi - k_lo)
+            if math.isinf(kappa):
+                continue
+            turn = min(kappa * ds[k], 2.0)
+            drift += turn * turn * ds[k]
+    return node, drift, total, carry
+
+
+@dataclass(frozen=True)
+class _Bump:
+    """The landing bump over periods k0 .. k0 + periods of a stretch (see the module docstring):
+    the law's speed v_c there is lowered by e v_c w(t), w = sin^2(pi x / D), x = t - t_start,
+    in plan time. times: the plan times of its points k0 .. k0 + periods, (periods + 1,)."""
+
+    k0: int
+    periods: int
+    times: np.ndarray
+    v_mm_s: float  # v_c
+
+    @property
+    def t_start(self) -> float:
+        return float(self.times[0])
+
+    @property
+    def duration(self) -> float:  # D
+        return float(self.times[-1] - self.times[0])
+
+    def removed(self, t_s: np.ndarray) -> np.ndarray:
+        """Arc taken out by plan time t (per unit of e): v_c integral of w, (M,) -> (M,)."""
+        x = np.minimum(np.maximum(t_s - self.t_start, 0.0), self.duration)
+        d = self.duration
+        return self.v_mm_s * (0.5 * x - d / (4.0 * math.pi) * np.sin(2.0 * math.pi * x / d))
+
+    @cached_property
+    def taken(self) -> np.ndarray:
+        """(periods,) arc taken out of each of its periods' targets, per unit of e."""
+        return np.diff(self.removed(self.times))
+
+    @cached_property
+    def shape(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """v_c w, v_c w' and v_c w'' at its points k0 + 1 .. k0 + periods, (periods,) each."""
+        t_s = self.times[1:]
+        phase = 2.0 * math.pi * (t_s - self.t_start) / self.duration
+        w = 0.5 * (1.0 - np.cos(phase))
+        w1 = math.pi / self.duration * np.sin(phase)
+        w2 = 2.0 * (math.pi / self.duration) ** 2 * np.cos(phase)
+        return self.v_mm_s * w, self.v_mm_s * w1, self.v_mm_s * w2
+
+    def lower(self, ds: np.ndarray, lo: int, e: float) -> np.ndarray:
+        """The targets ds (M,) of periods lo .. lo + M - 1 with the bump of depth e taken out."""
+        first, stop = max(lo, self.k0), min(lo + ds.size, self.k0 + self.periods)
+        if e == 0.0 or first >= stop:
+            return ds
+        ds = ds.copy()
+        ds[first - lo:stop - lo] -= e * self.taken[first - self.k0:stop - self.k0]
+        return ds
+
+
+@dataclass(frozen=True, eq=False)
+class _StretchLaw:
+    """The law over one stretch between rests as it was stepped: points k0 .. k0 + n of the
+    curve, at plan times t_a .. t_b (`_plan_time`); the stretch's time scale, its sigma, its
+    landing bump and that bump's depth. v, a and j are worked out from it when asked for."""
+
+    k0: int
+    n: int
+    law: TimeLaw
+    t_a: float
+    t_b: float
+    scale: float
+    sigma: float
+    bump: _Bump | None
+    slowdown: float
+
+    def kinematics(self, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """v, a, j at its points lo .. hi - 1 (hi - lo,), scaled like the targets stepped (sigma,
+        and the stretch's scale), with the landing bump's own."""
+        _, _, v, a, j = self.law.sample(_plan_times(self.t_a, self.t_b, self.n, lo, hi))
+        bump = self.bump
+        if bump is not None:
+            first, stop = max(lo, bump.k0 + 1), min(hi, bump.k0 + 1 + bump.periods)
+            if first < stop:
+                vw, aw, jw = bump.shape
+                inside = slice(first - bump.k0 - 1, stop - bump.k0 - 1)
+                here = slice(first - lo, stop - lo)
+                v[here] -= self.slowdown * vw[inside]
+                a[here] -= self.slowdown * aw[inside]
+                j[here] -= self.slowdown * jw[inside]
+        return self.sigma * v / self.scale, self.sigma * a / self.scale**2, \
+            self.sigma * j / self.scale**3
+
+
+@dataclass(frozen=True, eq=False)
+class PointChunk:
+    """Points k0 .. k0 + M - 1 of a curve as they were stepped: u (M,), points (M, 3), and the
+    target stepped into each point ds (M,) (0 into the curve's first point). They lie in one
+    stretch, from its point `local` on (stretch None: the curve's first point, alone)."""
+
+    k0: int
+    u: np.ndarray
+    points: np.ndarray
+    ds_mm: np.ndarray
+    stretch: _StretchLaw | None
+    local: int
+    start_jerk_mm_s3: float  # j at the curve's first point (at rest there: v = a = 0)
+
+    def kinematics(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """v, a, j of the law at the points, (M,) each."""
+        if self.stretch is None:
+            zero = np.zeros(self.u.size)
+            return zero, zero, np.full(self.u.size, self.start_jerk_mm_s3)
+        return self.stretch.kinematics(self.local, self.local + self.u.size)
+
+
 @dataclass(frozen=True, eq=False)
 class Interpolation:
     """One curve's interpolation points. (N+1,) arrays except points (N+1, 3) and ds (N,)."""
@@ -243,31 +451,21 @@ class Interpolation:
 
     @cached_property
     def _kinematics(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """v, a, j of the law at the points, scaled like the targets stepped (sigma, and the
-        stretch's scale), with the landing bump's own; at rest at every stretch start."""
+        """v, a, j of the law at the points (`_StretchLaw.kinematics`); at rest at every
+        stretch start."""
         v_all = np.zeros(self.n_points)
         a_all = np.zeros(self.n_points)
         j_all = np.zeros(self.n_points)
         for st in self.stretches:
-            v, a, j = st.v[1:], st.a[1:], st.j[1:]
-            if st.bump is not None:  # the bump's own v, a, j at its points (see _Bump)
-                bump = slice(st.bump.k0, st.bump.k0 + st.bump.periods)
-                vw, aw, jw = st.bump.shape(st.t_plan[1:][bump])
-                v, a, j = v.copy(), a.copy(), j.copy()
-                v[bump] -= st.slowdown * vw
-                a[bump] -= st.slowdown * aw
-                j[bump] -= st.slowdown * jw
-            span = slice(st.k0 + 1, st.k0 + v.size + 1)
-            v_all[span] = st.sigma * v / st.scale
-            a_all[span] = st.sigma * a / st.scale**2
-            j_all[span] = st.sigma * j / st.scale**3
+            span = slice(st.k0 + 1, st.k0 + st.n + 1)
+            v_all[span], a_all[span], j_all[span] = st.kinematics(1, st.n + 1)
         j_all[0] = self.start_jerk_mm_s3
         for arr in (v_all, a_all, j_all):
             arr.setflags(write=False)
         return v_all, a_all, j_all
 
     def feed_fluctuation(self) -> np.ndarray:
-        """SPEC §3 / Table 2: | |P_{k+1} - P_k| - ds_k | / ds_k for every full period: (N,)."""
+        """design §3 / Table 2: | |P_{k+1} - P_k| - ds_k | / ds_k for every full period: (N,)."""
         chord = np.linalg.norm(np.diff(self.points, axis=0), axis=1)
         with np.errstate(divide="ignore", invalid="ignore"):
             ff = np.abs(chord - self.ds_mm) / self.ds_mm
@@ -275,139 +473,29 @@ class Interpolation:
 
 
 @jit
-def _sample_stretch(t0, s0, v0, a0, jk, t_a, t_b, n, grid_s, grid_kappa, with_drift):
-    """The law over a stretch of n periods from plan time t_a to t_b: the plan times (N+1,)
-    t_a + k (t_b - t_a) / n (t_b exactly at the end), v, a, j there (N+1,), the targets ds (N,)
-    and, if with_drift, how far rk2c's arc position will run ahead of them (else 0).
-
-    ds_k = s(t_k+1) - s(t_k) is taken piece by piece (the pieces' starts s0 differ, then the
-    arcs within them), so that a tiny step far along the curve keeps its relative precision.
-    The drift is sum(min(kappa ds, 2)^2 ds) / 24, the arc minus the chord of a circular arc of
-    curvature kappa per step, with kappa at the middle of each step interpolated linearly on
-    the grid (grid_s, grid_kappa (M,)); beside a corner (kappa infinite) from its finite side.
-    """
-    t_plan = np.empty(n + 1)
-    step = (t_b - t_a) / n
-    for k in range(n):
-        t_plan[k] = t_a + k * step
-    t_plan[n] = t_b
-    piece = np.empty(n + 1, dtype=np.int64)
-    local = np.empty(n + 1)
-    v = np.empty(n + 1)
-    a = np.empty(n + 1)
-    j = np.empty(n + 1)
-    evaluate(t0, s0, v0, a0, jk, t_plan, piece, local, v, a, j)
-    ds = np.empty(n)
-    for k in range(n):
-        ds[k] = (s0[piece[k + 1]] - s0[piece[k]]) + (local[k + 1] - local[k])
-    drift = 0.0
-    if with_drift:
-        last = grid_s.size - 1
-        node = 0
-        for k in range(n):
-            s = s0[piece[k]] + local[k] + 0.5 * ds[k]
-            while node + 1 < last and grid_s[node + 1] <= s:
-                node += 1
-            if s <= grid_s[0]:
-                kappa = grid_kappa[0]
-            elif s >= grid_s[last]:
-                kappa = grid_kappa[last]
-            else:
-                k_lo = grid_kappa[node]
-                k_hi = grid_kappa[node + 1]
-                if math.isinf(k_lo) or math.isinf(k_hi):  # beside a corner: the finite side
-                    kappa = k_hi if math.isinf(k_lo) else k_lo
-                else:
-                    w = (s - grid_s[node]) / (grid_s[node + 1] - grid_s[node])
-                    kappa = k_lo + w * (k_hi - k_lo)
-            if math.isinf(kappa):
-                continue
-            turn = min(kappa * ds[k], 2.0)
-            drift += turn * turn * ds[k]
-        drift /= 24.0
-    return t_plan, ds, v, a, j, drift
-
-
-@dataclass(frozen=True)
-class _Bump:
-    """The landing bump over periods k0 .. k0 + periods of a stretch (see the module docstring):
-    the law's speed v_c there is lowered by e v_c w(t), w = sin^2(pi x / D), x = t - t_start,
-    in plan time."""
-
-    k0: int
-    periods: int
-    t_start: float
-    duration: float  # D
-    v_mm_s: float  # v_c
-
-    def removed(self, t_s: np.ndarray) -> np.ndarray:
-        """Arc taken out by plan time t (per unit of e): v_c integral of w, (M,) -> (M,)."""
-        x = np.minimum(np.maximum(t_s - self.t_start, 0.0), self.duration)
-        d = self.duration
-        return self.v_mm_s * (0.5 * x - d / (4.0 * math.pi) * np.sin(2.0 * math.pi * x / d))
-
-    def shape(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """v_c w, v_c w' and v_c w'' at plan times (M,) inside the bump."""
-        phase = 2.0 * math.pi * (t_s - self.t_start) / self.duration
-        w = 0.5 * (1.0 - np.cos(phase))
-        w1 = math.pi / self.duration * np.sin(phase)
-        w2 = 2.0 * (math.pi / self.duration) ** 2 * np.cos(phase)
-        return self.v_mm_s * w, self.v_mm_s * w1, self.v_mm_s * w2
-
-
-@dataclass(frozen=True, eq=False)
-class _StretchLaw:
-    """The law over one stretch between rests as it was stepped: points k0 .. k0 + N of the
-    curve; the plan times, v, a, j (N+1,) from `_sample_stretch` (the bump not yet in them);
-    the stretch's time scale, its sigma, its landing bump and that bump's depth."""
-
-    k0: int
-    t_plan: np.ndarray
-    v: np.ndarray
-    a: np.ndarray
-    j: np.ndarray
-    scale: float
-    sigma: float
-    bump: _Bump | None
-    slowdown: float
-
-
-@jit
-def _last_flat_periods(t0, a0, jk, v0, duration, t_plan, periods):
-    """The first period k0 of the stretch's (t_plan (N+1,)) last `periods` periods that lie in
-    one piece of the law that cruises or holds (a = j = 0, v > 0), all before the stretch's
-    last period; the piece's speed. (-1, 0) if there are none."""
-    n = t_plan.size - 1
+def _last_flat_periods(t0, a0, jk, v0, duration, t_a, t_b, n, periods):
+    """The first period k0 of the last `periods` periods of the stretch (n periods, plan times
+    t_a .. t_b) that lie in one piece of the law that cruises or holds (a = j = 0, v > 0), all
+    before the stretch's last period; the piece's speed. (-1, 0) if there are none."""
     for i in range(t0.size - 1, -1, -1):
         end = t0[i + 1] if i + 1 < t0.size else duration
-        if end <= t_plan[0]:
+        if end <= t_a:
             break
-        if jk[i] != 0.0 or a0[i] != 0.0 or v0[i] <= 0.0 or t0[i] >= t_plan[n]:
+        if jk[i] != 0.0 or a0[i] != 0.0 or v0[i] <= 0.0 or t0[i] >= t_b:
             continue
-        # the periods k with t_plan[k] >= t0 and t_plan[k+1] <= end, the last one before n - 1
-        first = np.searchsorted(t_plan, t0[i])
-        stop = min(np.searchsorted(t_plan, end, side="right") - 1, n - 1)
+        # the periods k with t_k >= t0 and t_k+1 <= end, the last one before n - 1
+        first = _first_period_at(t_a, t_b, n, t0[i], False)
+        stop = min(_first_period_at(t_a, t_b, n, end, True) - 1, n - 1)
         if stop - first >= periods:
             return stop - periods, v0[i]
     return -1, 0.0
 
 
-def _bump_window(law, t_plan: np.ndarray) -> _Bump | None:
-    """The landing bump over the stretch's (t_plan (N+1,)) last BUMP_PERIODS periods in a cruise
-    or hold of the law, before its last period; None if there are none."""
-    k0, v_c = _last_flat_periods(law.t0_s, law.a0_mm_s2, law.jerk_mm_s3, law.v0_mm_s,
-                                 law.duration_s, t_plan, BUMP_PERIODS)
-    if k0 < 0:
-        return None
-    return _Bump(int(k0), BUMP_PERIODS, float(t_plan[k0]),
-                 float(t_plan[k0 + BUMP_PERIODS] - t_plan[k0]), float(v_c))
-
-
 @dataclass(frozen=True)
 class _Landing:
-    """How one stretch landed: the targets stepped (N,), sigma, the bump and its depth."""
+    """How one stretch landed: sigma, the bump and its depth, the kernel runs it took (a run
+    from the bump on in its share) and the wall time of its last full run."""
 
-    targets: np.ndarray
     sigma: float
     bump: _Bump | None
     slowdown: float
@@ -415,181 +503,290 @@ class _Landing:
     seconds: float
 
 
-def _land(curve, code: int, u_start: float, u_end: float, end_point: np.ndarray,
-          ds: np.ndarray, total: float, slow: float, sigma: float, bump: _Bump | None,
-          t_plan: np.ndarray, u: np.ndarray, pts: np.ndarray) -> _Landing:
-    """Step from u_start through ds (N,), whose sum is total, into u (N+1,) and pts (N+1, 3),
-    landing exactly on end_point (see the module docstring): first with targets sigma * ds,
-    then with a bump or another sigma.
+class _Stretch:
+    """One stretch between rests (plan piece p), stepped chunk by chunk: at most CHUNK_PERIODS
+    periods are sampled, stepped or held at a time, whatever the stretch's duration.
 
-    The kernel makes the first N-1 steps; the last point is end_point itself, and the residual
-    |end - P_{N-1}| - (last target) is driven to zero. It is continuous and monotone in sigma
-    and e even where C' vanishes at the end (the curve folds back there when extrapolated).
+    A stretch of at most CHUNK_PERIODS periods stays in memory ("resident"): its targets are
+    sampled once and its last run is what is written. A longer one keeps of a run only its last
+    point (all the landing needs) and the point where its bump starts; its targets are sampled
+    again from the law for every run (from the integer period index, so identically), and once
+    the landing is decided a last run hands its points out chunk by chunk. Both give the same
+    points to the last bit: a run's state between chunks is u alone.
     """
-    n = ds.size
-    knots, coef, degree = curve.knots, curve.span_polynomials, curve.degree
-    n_spans = int(np.searchsorted(knots, u_end, side="left"))  # last span ends at u_end
-    # Each step rounds the point to ~eps (length + coordinates), and those errors add up like a
-    # random walk: the landing resolves only to about sqrt(N) of them (measured: up to 1x on
-    # curves 1 m from the origin); ask no more, but never accept less than LANDING_REL_MAX.
-    noise = EPS * (total + max(abs(float(x)) for x in end_point)) * math.sqrt(n)
-    last_ds = float(ds[-1])
-    tol = max(LANDING_REL_TOL * last_ds, min(noise, LANDING_REL_MAX * last_ds))
-    head = ds[:-1]
 
-    def residual(last_target: float) -> float:
-        gap = math.sqrt(sum((float(end_point[i]) - float(pts[-2, i])) ** 2 for i in range(3)))
-        return (gap if u[-2] <= u_end else -gap) - last_target
+    def __init__(self, plan: Plan, p: int, code: int, slow: float, chunk: int) -> None:
+        curve, law = plan.curve, plan.law
+        self.plan = plan
+        self.code = code
+        self.slow = slow
+        self.chunk = chunk
+        self.n = int(plan.piece_periods[p])
+        key_a, key_b = int(plan.piece_key[p]), int(plan.piece_key[p + 1])
+        self.t_a, self.t_b = float(law.key_t_s[key_a]), float(law.key_t_s[key_b])
+        self.u_start, self.u_end = float(plan.key_u[key_a]), float(plan.key_u[key_b])
+        last = p == len(plan.piece_periods) - 1
+        self.end_point = np.asarray(curve.points[-1] if last else curve.point(self.u_end),
+                                    dtype=float)
+        self.n_spans = int(np.searchsorted(curve.knots, self.u_end, side="left"))
+        self.resident = self.n <= chunk
+        size = self.n + 1 if self.resident else chunk + 2  # + 2: a chunk's start and the end
+        self.u = np.empty(size)
+        self.pts = np.empty((size, 3))
+        self.u_bump = self.u_start  # u at the bump's first point, from the last full run
+        self.last_u = self.u_start  # u and point at the run's last stepped point (n - 1)
+        self.last_point = np.zeros(3)
+        # one pass over the targets: their sum, the last one, rk2c's drift (and, if resident,
+        # the targets themselves)
+        node, drift, total, carry = 0, 0.0, 0.0, 0.0
+        self.ds = np.empty(self.n if self.resident else min(self.n, chunk))
+        for lo in range(0, self.n, chunk):
+            ds = self.ds[:min(chunk, self.n - lo)] if not self.resident else self.ds
+            node, drift, total, carry = _sample_targets(
+                law.t0_s, law.s0_mm, law.v0_mm_s, law.a0_mm_s2, law.jerk_mm_s3, self.t_a,
+                self.t_b, self.n, lo, ds, plan.grid.s_mm, plan.grid.kappa_1_mm,
+                code == METHODS["rk2c"], node, drift, total, carry)
+            self.last_ds = float(ds[-1])
+        self.total = total + carry
+        self.drift = drift / 24.0
+        if not self.resident:
+            self.ds = np.empty(0)
+        k0, v_c = _last_flat_periods(law.t0_s, law.a0_mm_s2, law.jerk_mm_s3, law.v0_mm_s,
+                                     law.duration_s, self.t_a, self.t_b, self.n, BUMP_PERIODS)
+        self.bump = None if k0 < 0 else _Bump(
+            int(k0), BUMP_PERIODS, _plan_times(self.t_a, self.t_b, self.n, k0,
+                                               k0 + BUMP_PERIODS + 1), float(v_c))
 
-    def run(s: float) -> float:
-        step_spans(code, knots, coef, degree, n_spans, u_start, head, s, slow, u[:-1], pts[:-1])
-        return residual(s * last_ds)
-
-    start = time.perf_counter()
-    r = run(sigma)
-    seconds = time.perf_counter() - start
-    runs = 1.0
-    if abs(r) > tol and r < 0.0 and bump is not None:
-        landed = _land_bump(code, knots, coef, degree, n_spans, ds, slow, sigma, bump, t_plan,
-                            u, pts, r, tol, residual)
-        if landed is not None:
-            targets, slowdown, bump_runs = landed
-            return _Landing(targets, sigma, bump, slowdown, runs + bump_runs, seconds)
-        r = run(sigma)  # the bump could not land: back to the plain run
-        runs += 1.0
-    # d(residual)/d(sigma) ~ -total: Newton, then secant steps, never above 1 (that would raise
-    # the speed). The best run after the first is kept aside, so that a last run that made
-    # things worse (rounding) costs a copy back.
-    sigma_prev, r_prev = sigma, r
-    best = (abs(r), sigma)
-    kept = None
-    sigma = min(sigma + r / total, 1.0)
-    while abs(r_prev) > tol:
-        start = time.perf_counter()
-        r = run(sigma)
-        seconds = time.perf_counter() - start
-        runs += 1.0
-        improved = abs(r) < best[0]
-        if improved:
-            best = (abs(r), sigma)
-        # stop at the tolerance, or where the residual stops improving: below ~1e-11 mm it
-        # is rounding (and branch switches inside the kernel), not a function of sigma
-        if abs(r) <= tol or runs >= LANDING_MAX_RUNS or r == r_prev or not improved:
-            break
-        kept = (sigma, u[:-1].copy(), pts[:-1].copy())
-        sigma, sigma_prev, r_prev = (min(sigma - r * (sigma - sigma_prev) / (r - r_prev), 1.0),
-                                     sigma, r)
-    if sigma != best[1]:  # the last run was not the best one: back to the best
-        sigma = best[1]
-        if kept is not None and kept[0] == sigma:
-            u[:-1], pts[:-1] = kept[1], kept[2]
+    def targets(self, lo: int, hi: int, e: float) -> np.ndarray:
+        """The targets of periods lo .. hi - 1 (hi - lo,), with the bump of depth e taken out."""
+        if self.resident:
+            ds = self.ds[lo:hi]
         else:
-            run(sigma)
+            law = self.plan.law
+            ds = np.empty(hi - lo)
+            _sample_targets(law.t0_s, law.s0_mm, law.v0_mm_s, law.a0_mm_s2, law.jerk_mm_s3,
+                            self.t_a, self.t_b, self.n, lo, ds, self.plan.grid.s_mm,
+                            self.plan.grid.kappa_1_mm, False, 0, 0.0, 0.0, 0.0)
+        return ds if self.bump is None else self.bump.lower(ds, lo, e)
+
+    def _step(self, u0: float, ds: np.ndarray, sigma: float, u_out: np.ndarray,
+              p_out: np.ndarray) -> None:
+        curve = self.plan.curve
+        step_spans(self.code, curve.knots, curve.span_polynomials, curve.degree, self.n_spans,
+                   u0, ds, sigma, self.slow, u_out, p_out)
+
+    def run(self, sigma: float, e: float = 0.0, from_bump: bool = False) -> float:
+        """Step with targets sigma * ds (the bump of depth e taken out) to the last point before
+        the end, from the start or from the bump's first point (u_bump of the last full run);
+        return the landing residual |end - P_n-1| - (last target), signed by the side of the end
+        the point lies on."""
+        k = self.bump.k0 if from_bump and self.bump is not None else 0
+        u = self.u_bump if k else self.u_start
+        last = self.n - 1  # steps 0 .. n - 2 reach point n - 1
+        while True:
+            hi = min(k + self.chunk, last)
+            base = k if self.resident else 0
+            m = hi - k
+            self._step(u, self.targets(k, hi, e), sigma, self.u[base:base + m + 1],
+                       self.pts[base:base + m + 1])
+            if not from_bump and self.bump is not None and k <= self.bump.k0 <= hi:
+                self.u_bump = float(self.u[base + self.bump.k0 - k])
+            u = float(self.u[base + m])
+            if hi == last:
+                break
+            k = hi
+        self.last_u = u
+        self.last_point = self.pts[base + m].copy()
+        gap = math.sqrt(sum((float(self.end_point[i]) - float(self.last_point[i])) ** 2
+                            for i in range(3)))
+        return (gap if u <= self.u_end else -gap) - sigma * self.last_ds
+
+    def land(self, sigma: float) -> _Landing:
+        """Land exactly on the end (see the module docstring): first with targets sigma * ds,
+        then with a bump or another sigma.
+
+        The kernel makes the first n - 1 steps; the last point is the end itself, and the
+        residual |end - P_n-1| - (last target) is driven to zero. It is continuous and monotone
+        in sigma and e even where C' vanishes at the end (the curve folds back there when
+        extrapolated).
+        """
+        n, total, last_ds = self.n, self.total, self.last_ds
+        # Each step rounds the point to ~eps (length + coordinates), and those errors add up like
+        # a random walk: the landing resolves only to about sqrt(N) of them (measured: up to 1x
+        # on curves 1 m from the origin); ask no more, but never accept less than
+        # LANDING_REL_MAX.
+        noise = EPS * (total + max(abs(float(x)) for x in self.end_point)) * math.sqrt(n)
+        tol = max(LANDING_REL_TOL * last_ds, min(noise, LANDING_REL_MAX * last_ds))
+        start = time.perf_counter()
+        r = self.run(sigma)
+        seconds = time.perf_counter() - start
+        runs = 1.0
+        if abs(r) > tol and r < 0.0 and self.bump is not None:
+            landed = self._land_bump(self.bump, sigma, r, tol)
+            if landed is not None:
+                slowdown, bump_runs = landed
+                return _Landing(sigma, self.bump, slowdown, runs + bump_runs, seconds)
+            r = self.run(sigma)  # the bump could not land: back to the plain run
             runs += 1.0
-    return _Landing(sigma * ds, sigma, None, 0.0, runs, seconds)
+        # d(residual)/d(sigma) ~ -total: Newton, then secant steps, never above 1 (that would
+        # raise the speed). A resident stretch keeps the best run after the first aside, so
+        # that a last run that made things worse (rounding) costs a copy back.
+        sigma_prev, r_prev = sigma, r
+        best = (abs(r), sigma)
+        kept = None
+        sigma = min(sigma + r / total, 1.0)
+        while abs(r_prev) > tol:
+            start = time.perf_counter()
+            r = self.run(sigma)
+            seconds = time.perf_counter() - start
+            runs += 1.0
+            improved = abs(r) < best[0]
+            if improved:
+                best = (abs(r), sigma)
+            # stop at the tolerance, or where the residual stops improving: below ~1e-11 mm it
+            # is rounding (and branch switches inside the kernel), not a function of sigma
+            if abs(r) <= tol or runs >= LANDING_MAX_RUNS or r == r_prev or not improved:
+                break
+            if self.resident:
+                kept = (sigma, self.u[:n].copy(), self.pts[:n].copy())
+            sigma, sigma_prev, r_prev = (min(sigma - r * (sigma - sigma_prev) / (r - r_prev), 1.0),
+                                         sigma, r)
+        if sigma != best[1]:  # the last run was not the best one: back to the best
+            sigma = best[1]
+            if kept is not None and kept[0] == sigma:
+                self.u[:n], self.pts[:n] = kept[1], kept[2]
+            else:
+                self.run(sigma)
+                runs += 1.0
+        return _Landing(sigma, None, 0.0, runs, seconds)
 
-
-def _land_bump(code, knots, coef, degree, n_spans, ds, slow, sigma, bump, t_plan, u, pts,
-               r_full, tol, residual):
-    """Step 2 of the landing: the depth e of the bump that takes out the overshoot r_full < 0
-    of the full run, by a secant search over runs from the bump's first point on (the best run
-    where rounding stops it short of the tolerance). Returns the targets, e and the runs (as a
-    share of the full run), or None if e would exceed BUMP_MAX_SLOWDOWN or no bump does better
-    than none."""
-    n = ds.size
-    k0 = bump.k0
-    taken = np.diff(bump.removed(t_plan[k0:k0 + bump.periods + 1]))  # (M,) per unit of e
-    targets = sigma * ds
-    tail = targets[k0:n - 1].copy()
-    share = (n - 1 - k0) / (n - 1)
-    u0 = float(u[k0])
-
-    def run_tail(e: float) -> float:
-        tail[:bump.periods] = sigma * (ds[k0:k0 + bump.periods] - e * taken)
-        step_spans(code, knots, coef, degree, n_spans, u0, tail, 1.0, slow, u[k0:-1],
-                   pts[k0:-1])
-        return residual(float(targets[-1]))
-
-    # r rises by sigma * (arc taken out): exactly sigma * v_c D / 2 per unit of e
-    e_prev, r_prev = 0.0, r_full
-    e = -r_full / (sigma * float(taken.sum()))
-    best = (abs(r_full), 0.0)
-    runs = 0.0
-    for _ in range(LANDING_MAX_RUNS):
-        if not 0.0 < e <= BUMP_MAX_SLOWDOWN:
+    def _land_bump(self, bump: _Bump, sigma: float, r_full: float,
+                   tol: float) -> tuple[float, float] | None:
+        """Step 2 of the landing: the depth e of the bump that takes out the overshoot r_full < 0
+        of the full run, by a secant search over runs from the bump's first point on (the best
+        run where rounding stops it short of the tolerance). Returns e and the runs (as a share
+        of the full run), or None if e would exceed BUMP_MAX_SLOWDOWN or no bump does better
+        than none."""
+        share = (self.n - 1 - bump.k0) / (self.n - 1)
+        # r rises by sigma * (arc taken out): exactly sigma * v_c D / 2 per unit of e
+        e_prev, r_prev = 0.0, r_full
+        e = -r_full / (sigma * float(bump.taken.sum()))
+        best = (abs(r_full), 0.0)
+        runs = 0.0
+        for _ in range(LANDING_MAX_RUNS):
+            if not 0.0 < e <= BUMP_MAX_SLOWDOWN:
+                return None
+            r = self.run(sigma, e, from_bump=True)
+            runs += share
+            if abs(r) < best[0]:
+                best = (abs(r), e)
+            # stop at the tolerance, or where the residual stops improving (rounding)
+            if abs(r) <= tol or r == r_prev or abs(r) >= abs(r_prev):
+                break
+            e, e_prev, r_prev = e - r * (e - e_prev) / (r - r_prev), e, r
+        if best[1] == 0.0:  # no bump did better than none
             return None
-        r = run_tail(e)
-        runs += share
-        if abs(r) < best[0]:
-            best = (abs(r), e)
-        # stop at the tolerance, or where the residual stops improving (rounding)
-        if abs(r) <= tol or r == r_prev or abs(r) >= abs(r_prev):
-            break
-        e, e_prev, r_prev = e - r * (e - e_prev) / (r - r_prev), e, r
-    if best[1] == 0.0:  # no bump did better than none
-        return None
-    if e != best[1]:
-        e = best[1]
-        run_tail(e)
-        runs += share
-    targets[k0:k0 + bump.periods] = sigma * (ds[k0:k0 + bump.periods] - e * taken)
-    return targets, e, runs
+        if e != best[1]:
+            e = best[1]
+            self.run(sigma, e, from_bump=True)
+            runs += share
+        return e, runs
+
+    def points(self, landing: _Landing, end_u: float) -> Iterator[tuple[int, np.ndarray,
+                                                                        np.ndarray, np.ndarray]]:
+        """The landed stretch's points 1 .. n, in chunks (first index, u (M,), points (M, 3),
+        targets into them (M,)): the last run's points, the end point (at end_u) last. A
+        resident stretch hands out its last run; a longer one steps once more, chunk by chunk."""
+        n, sigma, e = self.n, landing.sigma, landing.slowdown
+        if self.resident:
+            self.u[n] = end_u
+            self.pts[n] = self.end_point
+            yield 1, self.u[1:], self.pts[1:], sigma * self.targets(0, n, e)
+            return
+        k, u = 0, self.u_start
+        while True:
+            hi = min(k + self.chunk, n - 1)
+            final = hi == n - 1
+            m = hi - k
+            ds = self.targets(k, hi + final, e)
+            u_out = np.empty(m + 1 + final)
+            p_out = np.empty((m + 1 + final, 3))
+            self._step(u, ds[:m], sigma, u_out[:m + 1], p_out[:m + 1])
+            if final:
+                u_out[-1] = end_u
+                p_out[-1] = self.end_point
+            yield k + 1, u_out[1:], p_out[1:], sigma * ds
+            if final:
+                return
+            u = float(u_out[m])
+            k = hi
+
+
+class Stepping:
+    """One curve's interpolation, produced chunk by chunk (`chunks`): memory is bounded by
+    CHUNK_PERIODS whatever the curve's duration. The landing figures (runs, seconds, the
+    stretches' laws) are complete once the chunks are exhausted."""
+
+    def __init__(self, plan: Plan, method: str = "rk2c") -> None:
+        self.plan = plan
+        self.method = method
+        self.runs = 0.0
+        self.seconds = 0.0
+        self.stretches: list[_StretchLaw] = []
+        self.start_jerk_mm_s3 = 0.0
+
+    def chunks(self) -> Iterator[PointChunk]:
+        """The curve's points in order: its first point alone, then every stretch between rests
+        (stepped and landed as a whole first: its points are only known once it has landed)."""
+        plan = self.plan
+        curve, law = plan.curve, plan.law
+        code = METHODS[self.method]
+        mean_speed = plan.length_mm / (curve.u_max - curve.u_min)
+        slow = SLOW_SPEED_REL * mean_speed
+        moving = [p for p in range(len(plan.piece_periods)) if plan.piece_periods[p] > 0]
+        # at rest at the start (and at every stretch start): v = a = 0, the jerk of the first
+        # piece
+        first_j = float(law.jerk_mm_s3[0]) if law.jerk_mm_s3.size else 0.0
+        first_scale = float(plan.piece_scale[0]) if plan.piece_scale.size else 1.0
+        start_u = float(plan.key_u[plan.piece_key[moving[0]]]) if moving else curve.u_min
+        k0 = 0  # index of the stretch's first point
+        for i, p in enumerate(moving):
+            stretch = _Stretch(plan, p, code, slow, CHUNK_PERIODS)
+            sigma = 1.0
+            if code == METHODS["rk2c"] and stretch.total > 0.0:
+                sigma = min(1.0, 1.0 - stretch.drift / stretch.total + LANDING_MARGIN_REL)
+            landing = stretch.land(sigma)
+            self.runs += landing.runs
+            self.seconds += landing.seconds
+            st = _StretchLaw(k0, stretch.n, law, stretch.t_a, stretch.t_b,
+                             float(plan.piece_scale[p]), landing.sigma, landing.bump,
+                             landing.slowdown)
+            self.stretches.append(st)
+            if i == 0:
+                self.start_jerk_mm_s3 = landing.sigma * first_j / first_scale**3
+                yield self._first_point(start_u)
+            # a stretch's last point is where the next one starts stepping from
+            end_u = (float(plan.key_u[plan.piece_key[moving[i + 1]]]) if i + 1 < len(moving)
+                     else stretch.u_end)
+            for local, u, pts, ds in stretch.points(landing, end_u):
+                yield PointChunk(k0 + local, u, pts, ds, st, local, self.start_jerk_mm_s3)
+            k0 += stretch.n
+        if not moving:
+            self.start_jerk_mm_s3 = first_j / first_scale**3
+            yield self._first_point(start_u)
+
+    def _first_point(self, u: float) -> PointChunk:
+        return PointChunk(0, np.array([u]), np.array(self.plan.curve.points[:1], dtype=float),
+                          np.zeros(1), None, 0, self.start_jerk_mm_s3)
 
 
 def interpolate(plan: Plan, method: str = "rk2c") -> Interpolation:
-    """Step along the planned curve with `method`; see the module docstring.
-
-    Every stretch between rests is sampled from the time law at its periods, stepped and landed
-    in place in the curve's arrays.
-    """
-    curve = plan.curve
-    law = plan.law
-    period = plan.limits.period_s
-    code = METHODS[method]
-    mean_speed = plan.length_mm / (curve.u_max - curve.u_min)
-    slow = SLOW_SPEED_REL * mean_speed
-    key_u = plan.key_u
-    n_all = 1 + plan.n_periods
-    u_all = np.empty(n_all)
-    points = np.empty((n_all, 3))
-    ds_all = np.empty(n_all - 1)
-    u_all[0] = curve.u_min
-    points[0] = curve.points[0]
-    stretches: list[_StretchLaw] = []
-    runs, seconds = 0.0, 0.0
-    k0 = 0  # index of the stretch's first point
-    for p in range(len(plan.piece_periods)):
-        n = int(plan.piece_periods[p])
-        key_a, key_b = plan.piece_key[p], plan.piece_key[p + 1]
-        if n == 0:
-            continue
-        t_plan, ds, v, a, j, drift = _sample_stretch(
-            law.t0_s, law.s0_mm, law.v0_mm_s, law.a0_mm_s2, law.jerk_mm_s3,
-            float(law.key_t_s[key_a]), float(law.key_t_s[key_b]), n, plan.grid.s_mm,
-            plan.grid.kappa_1_mm, method == "rk2c")
-        sigma = 1.0
-        total = float(ds.sum())
-        if method == "rk2c" and total > 0.0:
-            sigma = min(1.0, 1.0 - drift / total + LANDING_MARGIN_REL)
-        last = p == len(plan.piece_periods) - 1
-        end_point = curve.points[-1] if last else curve.point(key_u[key_b])
-        start_point = points[k0].copy()  # the previous landing (or the curve start): exact
-        landing = _land(curve, code, float(key_u[key_a]), float(key_u[key_b]),
-                        np.asarray(end_point, dtype=float), ds, total, slow, sigma,
-                        _bump_window(law, t_plan), t_plan, u_all[k0:k0 + n + 1],
-                        points[k0:k0 + n + 1])
-        points[k0] = start_point
-        u_all[k0 + n] = key_u[key_b]
-        points[k0 + n] = end_point
-        runs += landing.runs
-        seconds += landing.seconds
-        ds_all[k0:k0 + n] = landing.targets
-        stretches.append(_StretchLaw(k0, t_plan, v, a, j, float(plan.piece_scale[p]),
-                                     landing.sigma, landing.bump, landing.slowdown))
-        k0 += n
-    # at rest at the start (and at every stretch start): v = a = 0, the jerk of the first piece
-    first_j = float(law.jerk_mm_s3[0]) if law.jerk_mm_s3.size else 0.0
-    first_scale = float(plan.piece_scale[0]) if plan.piece_scale.size else 1.0
-    first_sigma = stretches[0].sigma if stretches else 1.0
-    return Interpolation(method, period, u_all, points, ds_all, runs, seconds, tuple(stretches),
-                         first_sigma * first_j / first_scale**3)
+    """Step along the planned curve with `method`, into whole-curve arrays (for the analyses;
+    a conversion streams `Stepping.chunks` instead); see the module docstring."""
+    stepping = Stepping(plan, method)
+    chunks = list(stepping.chunks())
+    u = np.concatenate([c.u for c in chunks])
+    points = np.concatenate([c.points for c in chunks])
+    ds = np.concatenate([c.ds_mm for c in chunks])[1:]
+    return Interpolation(method, plan.limits.period_s, u, points, ds, stepping.runs,
+                         stepping.seconds, tuple(stepping.stretches), stepping.start_jerk_mm_s3)

@@ -22,7 +22,7 @@ MM_PER_INCH = 25.4
 
 @dataclass(frozen=True)
 class Machine:
-    """Limits of one machine (SPEC §4). Every field is positive and finite."""
+    """Limits of one machine (design §4). Every field is positive and finite."""
 
     period_s: float
     max_feed_mm_s: float
@@ -31,6 +31,9 @@ class Machine:
     max_jerk_mm_s3: float  # tangential
     max_normal_acc_mm_s2: float
     max_normal_jerk_mm_s3: float
+    # the longest planned cycle of one curve that is converted: a longer one is refused (a
+    # mistyped feed or period would otherwise step for hours)
+    max_curve_time_s: float = 3600.0
     decimals: int = 4  # coordinate decimals in the output
     feed_decimals: int = 3  # F word decimals (more when F is small; see gcode.writer)
 
@@ -52,6 +55,9 @@ class Machine:
 
 
 FLOAT_KEYS = tuple(f.name for f in dataclasses.fields(Machine) if f.type == "float")
+# keys a profile must give; the others have the Machine's default
+REQUIRED_KEYS = tuple(f.name for f in dataclasses.fields(Machine)
+                      if f.default is dataclasses.MISSING)
 INT_KEYS = ("decimals", "feed_decimals")
 INT_RANGES = {"decimals": (0, 8), "feed_decimals": (0, 6)}
 
@@ -94,7 +100,7 @@ def machine_from_mapping(data: Any, where: str, places: Mapping[str, Location] |
                 values[key] = _check_value(key, data[key])
             except ProfileError as exc:
                 raise exc.at(places.get(key, here)) from None
-        elif key in FLOAT_KEYS:
+        elif key in REQUIRED_KEYS:
             raise ProfileError(f"missing key '{key}'", here)
     for key, value in (overrides or {}).items():
         if value is not None:

@@ -1,9 +1,10 @@
 """read -> plan -> interpolate -> write for one input file. No printing: callers get reports.
 
 The program is streamed item by item: pass-through lines are copied as bytes, each curve block
-is planned, interpolated and written as G1 moves before the next item is read, so memory holds one
-curve at a time whatever the output size. Output files are written to a temporary file beside the
-target and renamed into place only when the whole conversion succeeded.
+is planned, then stepped and written as G1 moves chunk by chunk before the next item is read, so
+memory holds one chunk of one curve at a time whatever the output size or the curve's duration.
+Output files are written to a temporary file beside the target and renamed into place only when
+the whole conversion succeeded.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import numpy as np
 
 from nurbsfeed.errors import CurveError, InputError, Location
 from nurbsfeed.gcode.writer import MoveWriter, cycle_comment
-from nurbsfeed.interpolate import Interpolation, interpolate
+from nurbsfeed.interpolate import PointChunk, Stepping
 from nurbsfeed.json_reader import json_program
 from nurbsfeed.machine import Machine
 from nurbsfeed.planning.limits import Limits
@@ -31,6 +32,7 @@ from nurbsfeed.safety import MotionGuard, feed_cap_mm_s
 ENCODING = "utf-8"
 ERRORS = "surrogateescape"  # any byte sequence round-trips unchanged
 TRACE_HEADER = "curve,k,t,u,s,v,a,j,x,y,z\n"
+TRACE_ROW = ",".join(["%d", "%d"] + ["%.17g"] * 9) + "\n"
 
 
 @dataclass(frozen=True)
@@ -83,19 +85,32 @@ def read_program(path: Path, text: str, dialect: str = "auto",
 
 
 def plan_block(block: CurveBlock, machine: Machine) -> Plan:
-    """Plan one curve under the machine converted to the block's units."""
+    """Plan one curve under the machine converted to the block's units; a curve the planner
+    refuses (e.g. longer than max_curve_time_s) is refused at the block."""
     units_machine = machine.in_program_units(block.units)
     lim = Limits.from_machine(units_machine)
-    return plan_curve(block.curve, lim, block.feed_u, block.feed_mm_s)
+    try:
+        return plan_curve(block.curve, lim, block.feed_u, block.feed_mm_s,
+                          units_machine.max_curve_time_s)
+    except CurveError as exc:
+        raise exc.at(block.location) from None
 
 
-def write_trace_rows(out: BinaryIO, curve_index: int, result: Interpolation) -> None:
-    """Trace rows (SPEC §5) at full precision."""
-    n = result.n_points
-    table = np.column_stack([np.full(n, curve_index), np.arange(n), result.t_s, result.u,
-                             result.s_mm, result.v_mm_s, result.a_mm_s2, result.j_mm_s3,
-                             result.points])
-    np.savetxt(out, table, delimiter=",", fmt=["%d", "%d"] + ["%.17g"] * 9)
+def write_trace_rows(out: BinaryIO, curve_index: int, chunk: PointChunk, period_s: float,
+                     s_mm: float) -> float:
+    """Trace rows (design §5) of one chunk of points at full precision; s_mm: the arc at the point
+    before the chunk (0 before the first). Returns the arc at its last point."""
+    n = chunk.u.size
+    s = np.cumsum(np.concatenate(([s_mm], chunk.ds_mm)))[1:]
+    v, a, j = chunk.kinematics()
+    table = np.column_stack([np.full(n, curve_index), np.arange(chunk.k0, chunk.k0 + n),
+                             np.arange(chunk.k0, chunk.k0 + n, dtype=float) * period_s, chunk.u,
+                             s, v, a, j, chunk.points])
+    # the rows as np.savetxt writes them, which builds a class per call: garbage that only the
+    # cyclic collector frees, a call per chunk
+    for row in table:
+        out.write((TRACE_ROW % tuple(row)).encode("ascii"))
+    return float(s[-1])
 
 
 def convert_stream(items: Iterator[ProgramItem], out: BinaryIO, machine: Machine, method: str,
@@ -116,36 +131,54 @@ def convert_stream(items: Iterator[ProgramItem], out: BinaryIO, machine: Machine
 
 def convert_block(block: CurveBlock, index: int, out: BinaryIO, machine: Machine, method: str,
                   trace: BinaryIO | None) -> CurveResult:
-    """Replace one curve block by its comment line and G1 moves."""
+    """Replace one curve block by its comment line and G1 moves.
+
+    The curve is stepped chunk by chunk (interpolate.Stepping) and every chunk goes to the
+    writer (and the trace) before the next is stepped: memory does not grow with the curve's
+    duration. A curve the planner refuses is refused before anything of it is written.
+    """
     units_machine = machine.in_program_units(block.units)
-    plan = plan_block(block, machine)
-    interp = interpolate(plan, method)
-    guard_limits = dataclasses.replace(plan.limits, feed_mm_s=feed_cap_mm_s(plan.limits, block))
+    label = f'curve {index} "{block.curve.name}"'
     try:
-        MotionGuard(guard_limits, f"curve {index}").check(interp.points)
+        plan = plan_block(block, machine)
     except CurveError as exc:
-        raise exc.at(block.location) from None
+        raise CurveError(f"{label}: {exc.message}", exc.location) from None
+    n_points = 1 + plan.n_periods
+    period_s = plan.limits.period_s
+    guard = MotionGuard(dataclasses.replace(plan.limits,
+                                            feed_mm_s=feed_cap_mm_s(plan.limits, block)), label)
     eol = block.eol.encode("ascii")
-    out.write(cycle_comment(index, block.curve.name, interp.n_points, plan.limits.period_s,
-                            method, plan.cycle_time_s, plan.length_mm,
+    out.write(cycle_comment(index, block.curve.name, n_points, period_s, method,
+                            plan.cycle_time_s, plan.length_mm,
                             block.units).encode(ENCODING, ERRORS) + eol)
-    if block.curve.is_degenerate or plan.n_periods == 0:
+    moving = not block.curve.is_degenerate and plan.n_periods > 0
+    writer = None
+    if not moving:
         out.write(b"(nurbsfeed: zero-length curve, no move written)" + eol)
-        moves = 0
     else:
         if block.incremental:
             out.write(b"G90" + eol)
         writer = MoveWriter(out, units_machine.decimals, units_machine.feed_decimals,
-                            plan.limits.period_s, block.eol, interp.points[0])
-        writer.write_curve(interp.points)
+                            period_s, block.eol, block.curve.points[0])
+    s_mm = 0.0
+    for chunk in Stepping(plan, method).chunks():
+        try:
+            guard.check(chunk.points)
+        except CurveError as exc:
+            raise exc.at(block.location) from None
+        if writer is not None and chunk.stretch is not None:  # not the first point: the start
+            writer.add_points(chunk.points)
+        if trace is not None:
+            s_mm = write_trace_rows(trace, index, chunk, period_s, s_mm)
+    moves = 0
+    if writer is not None:
+        writer.end_curve()
         moves = writer.moves
         if block.incremental:
             out.write(b"G91" + eol)
         if block.feed_word_after:
             out.write(block.feed_word_after.encode(ENCODING, ERRORS) + eol)
-    if trace is not None:
-        write_trace_rows(trace, index, interp)
-    return CurveResult(index, block.curve.name, block.location, interp.n_points, moves,
+    return CurveResult(index, block.curve.name, block.location, n_points, moves,
                        plan.length_mm, plan.cycle_time_s, block.units)
 
 

@@ -163,11 +163,15 @@ BAD_PROFILES = [
     ("- 1\n- 2\n", "{p}: a machine profile is a mapping of keys to values, not list"),
     ("period_s: [1\n", "{p}:2:1: not valid YAML (expected ',' or ']', but got '<stream end>')"),
     ("{base}\nspeed: 3\n", "{p}:10:1: unknown key 'speed' (known keys: chord_error_mm, decimals, "
-     "feed_decimals, max_acc_mm_s2, max_feed_mm_s, max_jerk_mm_s3, max_normal_acc_mm_s2, "
-     "max_normal_jerk_mm_s3, period_s)"),
+     "feed_decimals, max_acc_mm_s2, max_curve_time_s, max_feed_mm_s, max_jerk_mm_s3, "
+     "max_normal_acc_mm_s2, max_normal_jerk_mm_s3, period_s)"),
     ("{base}\nchord_error_mm: .nan\n", "{p}:10:1: 'chord_error_mm' must be positive and finite, "
      "not nan"),
     ("{base}\nmax_acc_mm_s2: fast\n", "{p}:10:1: 'max_acc_mm_s2' must be a number, not 'fast'"),
+    ("{base}\nmax_curve_time_s: 0\n", "{p}:10:1: 'max_curve_time_s' must be positive and "
+     "finite, not 0"),
+    ("{base}\nmax_curve_time_s: .inf\n", "{p}:10:1: 'max_curve_time_s' must be positive and "
+     "finite, not inf"),
     ("{base}\ndecimals: 2.5\n", "{p}:10:1: 'decimals' must be a whole number from 0 to 8, "
      "not 2.5"),
 ]
@@ -199,6 +203,8 @@ def test_bad_machine_profile_names_file_key_and_value(tmp_path: Path, content: s
     (["--period-s", "0"], "option --period-s: 'period_s' must be positive and finite, not 0.0"),
     (["--decimals", "12"], "option --decimals: 'decimals' must be a whole number from 0 to 8, "
                            "not 12"),
+    (["--max-curve-time-s", "-1"], "option --max-curve-time-s: 'max_curve_time_s' must be "
+                                   "positive and finite, not -1.0"),
 ])
 def test_bad_options_exit_2_with_a_message(args, message) -> None:
     code, stdout, stderr = run("convert", str(SAMPLES / "quarter-circle.json"), *args)

@@ -9,7 +9,7 @@ import re
 import numpy as np
 import pytest
 
-from nurbsfeed.gcode.writer import MoveWriter, end_run_start, format_number, round_ticks
+from nurbsfeed.gcode.writer import MoveWriter, format_number, round_ticks, run_start
 from tests.gcode_parse import moves
 
 
@@ -168,7 +168,7 @@ def test_the_move_onto_the_end_spans_every_period_up_to_the_end() -> None:
     same_as_end = np.all(ticks == ticks[-1], axis=1)
     assert same_as_end[-5:].all()  # the path really ends at rest, below the resolution
     first_same = int(np.flatnonzero(~same_as_end)[-1]) + 1
-    assert end_run_start(pts, 4) == first_same
+    assert run_start(pts, ticks[-1], 4) == first_same
     out = io.BytesIO()
     MoveWriter(out, 4, 3, 0.001, "\n", pts[0]).write_curve(pts)
     text = out.getvalue().decode("ascii")
@@ -192,7 +192,7 @@ def test_a_short_curve_holds_its_end_run_too() -> None:
     pts = np.column_stack([pts, np.zeros(9)])
     ticks = round_ticks(pts, 4)
     assert np.array_equal(ticks[5:], [[4, 1, 0], [6, 0, 0], [6, 0, 0], [6, 0, 0]])
-    assert end_run_start(pts, 4) == 6
+    assert run_start(pts, ticks[-1], 4) == 6
     out = io.BytesIO()
     MoveWriter(out, 4, 3, 0.001, "\n", pts[0]).write_curve(pts)
     written, feeds, _ = moves(out.getvalue().decode("ascii"), ticks[0] / 1e4)
@@ -203,16 +203,39 @@ def test_a_short_curve_holds_its_end_run_too() -> None:
 
 def test_a_curve_with_no_point_rounding_onto_its_end_is_written_as_it_is() -> None:
     pts = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.5, 0.0], [3.0, 1.0, 0.0]])
-    assert end_run_start(pts, 4) == len(pts) - 1
+    assert run_start(pts, round_ticks(pts[-1:], 4)[0], 4) == len(pts) - 1
     out = io.BytesIO()
     MoveWriter(out, 4, 3, 0.001, "\n", pts[0]).write_curve(pts)
     assert out.getvalue().decode("ascii") == write(pts)[0]
     # all of them round onto the end: nothing is held, nothing moves
     still = np.full((5, 3), 1.00001)
-    assert end_run_start(still, 4) == len(still) - 1
+    assert run_start(still, round_ticks(still[-1:], 4)[0], 4) == 0
     out = io.BytesIO()
     writer = MoveWriter(out, 4, 3, 0.001, "\n", still[0])
     writer.write_curve(still)
     assert out.getvalue() == b"" and writer.moves == 0
 
 
+
+
+def test_a_curve_written_in_chunks_of_any_size_is_the_curve_written_whole() -> None:
+    """The run onto the end is held across chunk boundaries (a conversion hands the writer a
+    curve in chunks), and a run that rounds onto the last point of a chunk but is left again
+    by the next one is written as it would have been."""
+    rng = np.random.default_rng(7)
+    ends_at_rest = slow_start_path(3000)
+    back = slow_start_path(600)[::-1]  # reaches its end, stays there below the resolution,
+    away = np.vstack([back, back[-1] + np.cumsum(rng.normal(0, 1e-3, (50, 3)), axis=0),
+                      back[::-1], back])  # leaves, comes back, rests, leaves, ends at rest
+    for pts in (ends_at_rest, away):
+        whole = io.BytesIO()
+        MoveWriter(whole, 4, 3, 0.001, "\n", pts[0]).write_curve(pts)
+        for size in (1, 2, 7, 16, 100, 1000):
+            out = io.BytesIO()
+            writer = MoveWriter(out, 4, 3, 0.001, "\n", pts[0])
+            for lo in range(1, len(pts), size):
+                writer.add_points(pts[lo:lo + size])
+            writer.end_curve()
+            assert out.getvalue() == whole.getvalue(), size
+        written, _, _ = moves(whole.getvalue().decode("ascii"), round_ticks(pts[:1], 4)[0] / 1e4)
+        assert np.array_equal(written[-1], round_ticks(pts[-1:], 4)[0] / 1e4)

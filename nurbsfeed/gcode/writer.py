@@ -1,4 +1,4 @@
-"""G1 output (SPEC §5): coordinates as written, F from the written coordinates, no zero moves.
+"""G1 output (design §5): coordinates as written, F from the written coordinates, no zero moves.
 
 For each interpolation point the coordinates are rounded to `decimals`. A point whose rounded
 coordinates equal the previously written point is not written; its period goes to the next
@@ -11,6 +11,10 @@ of output units ("ticks"), drop a point equal to the last written one, compute F
 text: always a decimal point, trailing zeros dropped (`50.`, `12.34`), never `-0.`. F is written
 with `feed_decimals`, or more when F is small, so that it keeps 5 significant digits.
 `format_number` gives the same text for one value (it is `_emit_moves`' own X word).
+
+A curve comes in chunks (`MoveWriter.add_points`, then `end_curve`): the writer's state between
+them is the last written point, the periods since it, the last F and the held run of points that
+round onto the last point given, so the text does not depend on where the chunks are cut.
 """
 
 from __future__ import annotations
@@ -227,20 +231,19 @@ def round_ticks(points: np.ndarray, decimals: int) -> np.ndarray:
     return out
 
 
-def end_run_start(points: np.ndarray, decimals: int) -> int:
-    """Index of the first of the trailing points of points (N, 3) that round onto the last one
-    (N - 1 if none before it does, or if all of them do). Only the last few are looked at."""
-    end = round_ticks(points[-1:], decimals)[0]
+def run_start(points: np.ndarray, ticks: np.ndarray, decimals: int) -> int:
+    """Index of the first of the trailing points of points (M, 3) that round onto ticks (3,):
+    M if the last one does not, 0 if all of them do. Only the last few are looked at."""
     look = min(16, len(points))
-    while True:
+    while look:
         tail = round_ticks(points[-look:], decimals)
-        differ = np.flatnonzero(np.any(tail != end, axis=1))
-        if differ.size or look >= len(points):
+        differ = np.flatnonzero(np.any(tail != ticks, axis=1))
+        if differ.size:
+            return len(points) - look + int(differ[-1]) + 1
+        if look == len(points):
             break
         look = min(4 * look, len(points))
-    if differ.size == 0:
-        return len(points) - 1
-    return len(points) - look + int(differ[-1]) + 1
+    return 0
 
 
 def _check_decimals(decimals: int) -> None:
@@ -266,23 +269,58 @@ class MoveWriter:
         self.state[_FEED] = -1
         self.state[_FIRST] = 1
         self.buf = np.empty(0, dtype=np.uint8)
+        # the run of trailing points that round onto the last one given (see `add_points`)
+        self.held_count = 0
+        self.held_point = np.zeros(3)
+        self.held_ticks = np.zeros(3, dtype=np.int64)
 
     @property
     def moves(self) -> int:
         return int(self.state[_MOVES])
 
     def write_curve(self, points: np.ndarray) -> None:
-        """The curve's points (N, 3) after its first one (`start`), ending at the curve end.
+        """The curve's points (N, 3) after its first one (`start`), ending at the curve end."""
+        self.add_points(points[1:])
+        self.end_curve()
 
-        The trailing points that round onto the end are not written (they equal the end as
-        written), and a dropped point's period goes to the next move; at the end there is
+    def add_points(self, points: np.ndarray) -> None:
+        """The curve's next points (M, 3), one period apart, in chunks of any size.
+
+        The trailing points that round onto the curve end are not written (they equal the end
+        as written), and a dropped point's period goes to the next move; at the end there is
         none, so the machine would arrive early. Held at the point before them instead, they
         make the one move onto the end span all their periods: it arrives when the plan does.
+        The end is not known before the last chunk, so the run of points that round onto the
+        last point given so far is held: as a count and one of them, which is all writing them
+        needs (equal ticks: the first may move, the others only add their periods). A later
+        point that rounds elsewhere releases the run, written as it would have been.
         """
-        first_same = end_run_start(points, self.decimals)
-        self.write(points[1:first_same])
-        self.state[_PENDING] += len(points) - 1 - first_same  # held where the point before is
-        self.write(points[-1:])
+        if len(points) == 0:
+            return
+        last = round_ticks(points[-1:], self.decimals)[0]
+        first_held = run_start(points, last, self.decimals)
+        if first_held == 0 and self.held_count and np.array_equal(self.held_ticks, last):
+            self.held_count += len(points)
+            return
+        self._release()
+        self.write(points[:first_held])
+        self.held_point = np.array(points[first_held], dtype=float)
+        self.held_ticks = last
+        self.held_count = len(points) - first_held
+
+    def end_curve(self) -> None:
+        """Write the held run onto the end as one move spanning all its periods."""
+        if self.held_count:
+            self.state[_PENDING] += self.held_count - 1  # held where the point before is
+            self.write(self.held_point[None, :])
+        self.held_count = 0
+
+    def _release(self) -> None:
+        """Write the held run as the points it stands for (see `add_points`)."""
+        if self.held_count:
+            self.write(self.held_point[None, :])
+            self.state[_PENDING] += self.held_count - 1
+        self.held_count = 0
 
     def write(self, points: np.ndarray) -> None:
         """Points (N, 3) that follow the previous ones, one period apart."""

@@ -34,6 +34,7 @@ from functools import cached_property
 
 import numpy as np
 
+from nurbsfeed.errors import CurveError
 from nurbsfeed.geometry.nurbs import NurbsCurve
 from nurbsfeed.jit import jit
 from nurbsfeed.planning.grid import Grid, build_grid, polygon_length
@@ -46,6 +47,7 @@ SPEED_CHECK_REL_TOL = 1e-9  # a node "violates" when v > limit * (1 + this)
 GRID_STEPS = 2.0  # grid nodes at most this many full-speed steps apart
 MAX_GRID_NODES = 200_000  # per curve: spacing grows for very long curves at tiny periods
 PERIOD_ROUNDING_REL = 1e-9  # a duration within this of a whole period count is not stretched
+MAX_STRETCH_PERIODS = 1e15  # whole periods of one stretch: far below int64's range
 HOLD_ROOM = 0.05  # holds leave at least this fraction of a segment for its transitions
 
 SHOULDER_ROUNDS = 4  # times key points are added where a hold cannot (or should not) help
@@ -194,7 +196,9 @@ def _key_points(kappa, raw_limit, fcap, stop_index, stop_cos, peak_index, feed_n
 def _whole_periods(v_key, key_t, key_node, limit, v_nodes, period_s):
     """Step 6: the residual scale (whatever the key points could not fix: the largest v / limit
     over the nodes that are not keys, at least 1), the keys where the motion rests (P+1,), and
-    per stretch between them (P,) its whole number of periods and its lambda."""
+    per stretch between them (P,) its whole number of periods and its lambda. A stretch that
+    would last more than MAX_STRETCH_PERIODS periods, or not a finite number, gets -1 (the
+    caller refuses the curve): rounded into int64 it could wrap to a small count."""
     residual = 1.0
     is_key = np.zeros(limit.size, dtype=np.bool_)
     is_key[key_node] = True
@@ -211,8 +215,10 @@ def _whole_periods(v_key, key_t, key_node, limit, v_nodes, period_s):
     piece_scale = np.ones(piece_key.size - 1)
     for p in range(piece_key.size - 1):
         duration = key_t[piece_key[p + 1]] - key_t[piece_key[p]]
-        if duration > 0.0:
-            exact = duration * residual / period_s
+        exact = duration * residual / period_s
+        if not exact <= MAX_STRETCH_PERIODS:
+            piece_periods[p] = -1
+        elif duration > 0.0:
             piece_periods[p] = max(1, math.ceil(exact * (1.0 - PERIOD_ROUNDING_REL)))
             piece_scale[p] = piece_periods[p] * period_s / duration
     return residual, piece_key, piece_periods, piece_scale
@@ -340,9 +346,18 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
     return v, peak, t0, s0, v0, a0, jk, key_t, duration, v_nodes, rounds, from_rest
 
 
+def _too_long(cycle_s: float, max_curve_time_s: float) -> str:
+    return (f"planned cycle {cycle_s:.6g} s exceeds max_curve_time_s = {max_curve_time_s:g} s "
+            "(raise it in the profile or with --max-curve-time-s)")
+
+
 def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
-               feed_mm_s: np.ndarray = np.empty(0)) -> Plan:
-    """Plan the feed along one curve under `lim` (feed cap already in lim.feed_mm_s)."""
+               feed_mm_s: np.ndarray = np.empty(0), max_curve_time_s: float = math.inf) -> Plan:
+    """Plan the feed along one curve under `lim` (feed cap already in lim.feed_mm_s).
+
+    CurveError (without a place) when the planned cycle exceeds max_curve_time_s or is not a
+    finite number of periods: checked on the law's duration before it is rounded to whole
+    periods, then on the cycle itself."""
     rough_length = polygon_length(curve.points)
     spacing = max(GRID_STEPS * lim.feed_mm_s * lim.period_s, rough_length / MAX_GRID_NODES)
     feed_breaks = feed_u[1:] if feed_u.size else feed_u
@@ -372,9 +387,15 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
             break
         shoulders = np.union1d(shoulders, new)
     law = TimeLaw.from_pieces(*pieces, key_t, duration, grid.length_mm)
-
+    if not law.duration_s <= max_curve_time_s:
+        raise CurveError(_too_long(law.duration_s, max_curve_time_s))
     residual, piece_key, piece_periods, piece_scale = _whole_periods(
         v, law.key_t_s, key_node, limit, v_nodes, lim.period_s)
+    if np.any(piece_periods < 0):
+        raise CurveError(_too_long(law.duration_s * residual, max_curve_time_s))
+    cycle_s = float(piece_periods.sum()) * lim.period_s
+    if not cycle_s <= max_curve_time_s:
+        raise CurveError(_too_long(cycle_s, max_curve_time_s))
     for arr in (key_node, key_kind, nominal, v, peak, hold_start, hold_end, piece_key,
                 piece_periods, piece_scale):
         arr.setflags(write=False)
