@@ -63,6 +63,9 @@ EXPECTED = {
     "removable-zero-on-a-line": ([], 20.0),
     # four equal control points: the span [0.4, 0.6] has zero length, one corner
     "zero-length-span": ([(0.4, "corner")], None),
+    # a rational reversal just before a knot, where |C'| falls on through the samples around it
+    # (found by the tangent turning back between them; once taken at 39,000 mm/s^2)
+    "reversal-between-samples": ([(0.0494847550, "cusp")], None),
     # a double knot with the control point there repeated on both sides: C' = 0 from both
     "double-knot-corner-repeated-point": ([(0.5, "corner")], 20.0),
     # weights 1e-5 beside the ends: a hook of ~4 nm radius at each end and a near corner in

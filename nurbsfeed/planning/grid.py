@@ -480,8 +480,9 @@ def _stops(knots, coef, degree, breaks, u, speed, zero_speed, floor_mm, kappa_fl
     """Step 3: the interior points where C' vanishes and the motion must come to rest.
 
     Candidates are the samples where |C'| has a local minimum (refined by `_refine_zero`
-    inside the bracket of their neighbours) and every interior knot, where |C'| is taken from
-    both sides (a repeated control point makes it vanish on one side only). A candidate whose
+    inside the bracket of their neighbours), the intervals across which the tangent turns by
+    more than 90 degrees, and every interior knot, where |C'| is taken from both sides (a
+    repeated control point makes it vanish on one side only). A candidate whose
     |C'| is at most zero_speed is a zero of C'; each is classified by `_zero_is_smooth`: a
     corner (the tangent jumps), a cusp or a reversal (it turns back), or a zero beside which
     kappa is unbounded is a stop (u, and the cosine of the turn); a removable zero is not (its
@@ -489,8 +490,19 @@ def _stops(knots, coef, degree, breaks, u, speed, zero_speed, floor_mm, kappa_fl
     """
     n_ctrl = coef.shape[0]
     last = u.size - 1
-    found = np.empty(u.size + breaks.size)
+    found = np.empty(2 * u.size + breaks.size)
     n = 0
+    # unit tangents at the samples (0 where C' = 0)
+    tangent = np.zeros((u.size, 3))
+    span = degree
+    for q in range(u.size):
+        span = find_span(knots, degree, n_ctrl, u[q], span)
+        _, _, _, dx, dy, dz = point_d1(knots, coef, degree, span, u[q])
+        norm = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if norm > 0.0:
+            tangent[q, 0] = dx / norm
+            tangent[q, 1] = dy / norm
+            tangent[q, 2] = dz / norm
     for q in range(1, last):
         if speed[q] > speed[q - 1] or speed[q] > speed[q + 1]:
             continue
@@ -499,7 +511,26 @@ def _stops(knots, coef, degree, breaks, u, speed, zero_speed, floor_mm, kappa_fl
                 found[n] = u[q]
                 n += 1
             continue
-        at, at_speed = _refine_zero(knots, coef, degree, u[q], u[q - 1], u[q + 1])
+        # from the sample and from the middle of each interval beside it: the zero may lie
+        # just before a knot whose sample is taken on the span after it
+        best_speed = np.inf
+        at = u[q]
+        for start in (u[q], 0.5 * (u[q - 1] + u[q]), 0.5 * (u[q] + u[q + 1])):
+            here, here_speed = _refine_zero(knots, coef, degree, start, u[q - 1], u[q + 1])
+            if here_speed < best_speed:
+                at, best_speed = here, here_speed
+        if best_speed <= zero_speed:
+            found[n] = at
+            n += 1
+    # a cusp or reversal between two samples need not show as a minimum of |C'| on them (|C'|
+    # may fall on through it); the tangent turning back by more than 90 degrees does
+    for q in range(last):
+        turn = (tangent[q, 0] * tangent[q + 1, 0] + tangent[q, 1] * tangent[q + 1, 1]
+                + tangent[q, 2] * tangent[q + 1, 2])
+        if turn >= 0.0 or speed[q] <= zero_speed or speed[q + 1] <= zero_speed:
+            continue
+        at, at_speed = _refine_zero(knots, coef, degree, 0.5 * (u[q] + u[q + 1]), u[q],
+                                    u[q + 1])
         if at_speed <= zero_speed:
             found[n] = at
             n += 1
