@@ -44,6 +44,9 @@ from nurbsfeed.jit import jit
 
 KAPPA_STEP_REL = 0.1  # refine where kappa changes by more than 10 % between nodes
 REFINE_ROUNDS = 6  # ... down to 1/64 of the base spacing
+TURN_REFINE_ROUNDS = 24  # where the tangent turns more than kappa explains: down to 1/2^24
+TURN_EXPLAINED = 2.0  # a turn up to this times max(kappa) x chord needs no node between
+TURN_SLACK_RAD = 1e-3
 ZOOM_SAMPLES = 11  # the bracket (two grid steps) shrinks by 5 by sampling ...
 # ... then to this by Brent's method: about the square root of the double's resolution, since
 # kappa is flat to second order at a smooth maximum (kappa is then within ~1e-16 of its peak
@@ -608,17 +611,44 @@ def _merge(knots, coef, degree, u, kappa, speed, extra, zero_speed):
 @jit
 def _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed, kappa_floor, zero_speed):
     """Step 4b: halve every interval across which kappa (above kappa_floor) changes by more than
-    KAPPA_STEP_REL, up to REFINE_ROUNDS times. The planner bounds the limit between two nodes by
-    the lower of their limits; near a sharp curvature peak that bound is only tight when the
-    nodes are close, so the grid is made dense exactly there. A midpoint where C' = 0 (|C'| at
+    KAPPA_STEP_REL, up to REFINE_ROUNDS times, and every interval across which the tangent turns
+    by more than its end nodes' kappa explains, up to TURN_REFINE_ROUNDS times.
+
+    The planner bounds the limit between two nodes by the lower of their limits; near a sharp
+    curvature peak that bound is only tight when the nodes are close, so the grid is made dense
+    exactly there. A spike of kappa narrower than the node spacing (a near cusp: |C'| dips
+    between two nodes) shows in neither node's kappa, but in the turn of the tangent between
+    them: more than TURN_EXPLAINED times max(kappa) times the chord, plus TURN_SLACK_RAD, where
+    that turn over the chord is a curvature above kappa_floor. A midpoint where C' = 0 (|C'| at
     most zero_speed) takes the kappa of the interval's start."""
     n_ctrl = coef.shape[0]
-    for _ in range(REFINE_ROUNDS):
+    pts = np.empty((u.size, 3))
+    tan = np.zeros((u.size, 3))
+    span = degree
+    for q in range(u.size):
+        span = find_span(knots, degree, n_ctrl, u[q], span)
+        c = point_d2(knots, coef, degree, span, u[q])
+        _unit_tangent(c, pts, tan, q)
+    for rounds in range(TURN_REFINE_ROUNDS):
         split = np.zeros(u.size, dtype=np.bool_)
         n_split = 0
         for q in range(u.size - 1):
             high = max(kappa[q], kappa[q + 1])
-            if high > kappa_floor and abs(kappa[q + 1] - kappa[q]) > KAPPA_STEP_REL * high:
+            if (rounds < REFINE_ROUNDS and high > kappa_floor
+                    and abs(kappa[q + 1] - kappa[q]) > KAPPA_STEP_REL * high):
+                split[q] = True
+                n_split += 1
+                continue
+            cos = tan[q, 0] * tan[q + 1, 0] + tan[q, 1] * tan[q + 1, 1] + tan[q, 2] * tan[q + 1, 2]
+            if cos == 0.0 and (tan[q, 0] == 0.0 and tan[q, 1] == 0.0 and tan[q, 2] == 0.0
+                               or tan[q + 1, 0] == 0.0 and tan[q + 1, 1] == 0.0
+                               and tan[q + 1, 2] == 0.0):
+                continue  # C' = 0 at an end of the interval: a stop or a curve end
+            turn = math.acos(min(1.0, max(-1.0, cos)))
+            chord = math.sqrt((pts[q + 1, 0] - pts[q, 0]) ** 2 + (pts[q + 1, 1] - pts[q, 1]) ** 2
+                              + (pts[q + 1, 2] - pts[q, 2]) ** 2)
+            if (turn > TURN_EXPLAINED * high * chord + TURN_SLACK_RAD
+                    and turn > kappa_floor * chord):
                 split[q] = True
                 n_split += 1
         if n_split == 0:
@@ -627,12 +657,16 @@ def _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed, kappa_floor,
         u_new = np.empty(size)
         k_new = np.empty(size)
         s_new = np.empty(size)
+        p_new = np.empty((size, 3))
+        t_new = np.zeros((size, 3))
         n = 0
         span = degree
         for q in range(u.size):
             u_new[n] = u[q]
             k_new[n] = kappa[q]
             s_new[n] = speed[q]
+            p_new[n] = pts[q]
+            t_new[n] = tan[q]
             n += 1
             if split[q]:
                 mid = 0.5 * (u[q] + u[q + 1])
@@ -642,9 +676,23 @@ def _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed, kappa_floor,
                 u_new[n] = mid
                 k_new[n] = k_mid if math.isfinite(k_mid) and s_mid > zero_speed else kappa[q]
                 s_new[n] = s_mid
+                _unit_tangent(c, p_new, t_new, n)
                 n += 1
-        u, kappa, speed = u_new, k_new, s_new
+        u, kappa, speed, pts, tan = u_new, k_new, s_new, p_new, t_new
     return u, kappa, speed
+
+
+@jit
+def _unit_tangent(c, pts, tan, q):
+    """C and the unit tangent from point_d2's c into pts[q], tan[q] (tangent 0 where C' = 0)."""
+    pts[q, 0] = c[0]
+    pts[q, 1] = c[1]
+    pts[q, 2] = c[2]
+    norm = math.sqrt(c[3] * c[3] + c[4] * c[4] + c[5] * c[5])
+    if norm > 0.0:
+        tan[q, 0] = c[3] / norm
+        tan[q, 1] = c[4] / norm
+        tan[q, 2] = c[5] / norm
 
 
 @jit
