@@ -161,9 +161,11 @@ def test_a_curve_of_two_hours_converts_below_300_mb(tmp_path: Path) -> None:
         "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)\n")
     out = tmp_path / "long.nc"
     # compiling the kernels (a cold numba cache, as in a fresh clone) takes memory of its own:
-    # a short conversion in another process fills the cache first
+    # a shorter conversion in another process, long enough to be stepped in chunks too
+    # (78,500 periods), fills the cache first
     subprocess.run([sys.executable, "-m", "nurbsfeed.cli", "convert", "-q",
-                    str(SAMPLES / "quarter-circle.json"), "-o", str(out)], check=True)
+                    str(SAMPLES / "quarter-circle.json"), "--max-feed-mm-s", "0.2", "-o",
+                    str(out)], check=True)
     done = subprocess.run(
         [sys.executable, "-c", script, "convert", str(SAMPLES / "quarter-circle.json"), "-q",
          "--max-feed-mm-s", "0.002", "--max-curve-time-s", "10000", "-o", str(out)],

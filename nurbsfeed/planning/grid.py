@@ -47,6 +47,7 @@ REFINE_ROUNDS = 6  # ... down to 1/64 of the base spacing
 TURN_REFINE_ROUNDS = 24  # where the tangent turns more than kappa explains: down to 1/2^24
 TURN_EXPLAINED = 2.0  # a turn up to this times max(kappa) x chord needs no node between
 TURN_SLACK_RAD = 1e-3
+REFINE_GROWTH_MAX = 8  # the refinement stops before the grid grows beyond this factor
 ZOOM_SAMPLES = 11  # the bracket (two grid steps) shrinks by 5 by sampling ...
 # ... then to this by Brent's method: about the square root of the double's resolution, since
 # kappa is flat to second order at a smooth maximum (kappa is then within ~1e-16 of its peak
@@ -609,7 +610,8 @@ def _merge(knots, coef, degree, u, kappa, speed, extra, zero_speed):
 
 
 @jit
-def _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed, kappa_floor, zero_speed):
+def _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed, kappa_floor, zero_speed,
+                              floor_mm):
     """Step 4b: halve every interval across which kappa (above kappa_floor) changes by more than
     KAPPA_STEP_REL, up to REFINE_ROUNDS times, and every interval across which the tangent turns
     by more than its end nodes' kappa explains, up to TURN_REFINE_ROUNDS times.
@@ -619,8 +621,10 @@ def _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed, kappa_floor,
     exactly there. A spike of kappa narrower than the node spacing (a near cusp: |C'| dips
     between two nodes) shows in neither node's kappa, but in the turn of the tangent between
     them: more than TURN_EXPLAINED times max(kappa) times the chord, plus TURN_SLACK_RAD, where
-    that turn over the chord is a curvature above kappa_floor. A midpoint where C' = 0 (|C'| at
-    most zero_speed) takes the kappa of the interval's start."""
+    that turn over the chord is a curvature above kappa_floor (not where C' = 0 at a node, or
+    the chord is shorter than floor_mm). A midpoint where C' = 0 (|C'| at most zero_speed) takes
+    the kappa of the interval's start. The grid grows at most REFINE_GROWTH_MAX-fold: what a
+    refinement stopped there misses, the motion guard (nurbsfeed/safety.py) refuses."""
     n_ctrl = coef.shape[0]
     pts = np.empty((u.size, 3))
     tan = np.zeros((u.size, 3))
@@ -629,6 +633,7 @@ def _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed, kappa_floor,
         span = find_span(knots, degree, n_ctrl, u[q], span)
         c = point_d2(knots, coef, degree, span, u[q])
         _unit_tangent(c, pts, tan, q)
+    most = REFINE_GROWTH_MAX * u.size
     for rounds in range(TURN_REFINE_ROUNDS):
         split = np.zeros(u.size, dtype=np.bool_)
         n_split = 0
@@ -639,19 +644,19 @@ def _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed, kappa_floor,
                 split[q] = True
                 n_split += 1
                 continue
-            cos = tan[q, 0] * tan[q + 1, 0] + tan[q, 1] * tan[q + 1, 1] + tan[q, 2] * tan[q + 1, 2]
-            if cos == 0.0 and (tan[q, 0] == 0.0 and tan[q, 1] == 0.0 and tan[q, 2] == 0.0
-                               or tan[q + 1, 0] == 0.0 and tan[q + 1, 1] == 0.0
-                               and tan[q + 1, 2] == 0.0):
-                continue  # C' = 0 at an end of the interval: a stop or a curve end
-            turn = math.acos(min(1.0, max(-1.0, cos)))
+            if speed[q] <= zero_speed or speed[q + 1] <= zero_speed:
+                continue  # C' = 0 at an end of the interval (a stop, a curve end): no tangent
             chord = math.sqrt((pts[q + 1, 0] - pts[q, 0]) ** 2 + (pts[q + 1, 1] - pts[q, 1]) ** 2
                               + (pts[q + 1, 2] - pts[q, 2]) ** 2)
+            if chord <= floor_mm:
+                continue  # no length: nothing between the nodes to plan for
+            cos = tan[q, 0] * tan[q + 1, 0] + tan[q, 1] * tan[q + 1, 1] + tan[q, 2] * tan[q + 1, 2]
+            turn = math.acos(min(1.0, max(-1.0, cos)))
             if (turn > TURN_EXPLAINED * high * chord + TURN_SLACK_RAD
                     and turn > kappa_floor * chord):
                 split[q] = True
                 n_split += 1
-        if n_split == 0:
+        if n_split == 0 or u.size + n_split > most:
             break
         size = u.size + n_split
         u_new = np.empty(size)
@@ -732,7 +737,7 @@ def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, f
     u, kappa, speed = _merge(knots, coef, degree, u, kappa, speed, extra, zero_speed)
     _fill_singular(kappa)
     u, kappa, speed = _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed,
-                                                kappa_floor, zero_speed)
+                                                kappa_floor, zero_speed, floor_mm)
     return u, kappa, speed, peak_u, stop_u, stop_cos, mean_speed
 
 
