@@ -26,7 +26,7 @@ from nurbsfeed.jit import jit
 from nurbsfeed.planning.limits import Limits
 from nurbsfeed.program import CurveBlock
 
-GUARD_FEED_REL = 1e-6
+GUARD_FEED_REL = 1e-3  # a wild move is far above; a stepping error of 1e-4 is not one
 GUARD_ACC_REL = 0.05
 GUARD_ABS_MM = 1e-9
 

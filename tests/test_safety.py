@@ -10,7 +10,7 @@ from nurbsfeed.interpolate import interpolate
 from nurbsfeed.machine import load_machine
 from nurbsfeed.planning.limits import Limits
 from nurbsfeed.planning.planner import plan_curve
-from nurbsfeed.safety import GUARD_ACC_REL, MotionGuard
+from nurbsfeed.safety import GUARD_ACC_REL, GUARD_FEED_REL, MotionGuard
 
 DEFAULT = Limits.from_machine(load_machine("default"))  # 200 mm/s, 2000 mm/s^2, 1 ms
 
@@ -27,9 +27,9 @@ def test_a_move_above_the_feed_cap_is_refused() -> None:
 
 
 def test_the_feed_cap_on_both_sides() -> None:
-    MotionGuard(DEFAULT, "c").check(line(200.0, 50))
+    MotionGuard(DEFAULT, "c").check(line(200.0 * (1 + 0.9 * GUARD_FEED_REL), 50))
     with pytest.raises(CurveError, match="above the feed cap of 200 mm/s"):
-        MotionGuard(DEFAULT, "c").check(line(200.0 * (1 + 1e-5), 50))
+        MotionGuard(DEFAULT, "c").check(line(200.0 * (1 + 1.1 * GUARD_FEED_REL), 50))
 
 
 def test_a_corner_at_speed_is_refused_across_chunks() -> None:
