@@ -104,7 +104,7 @@ def test_projection_recovers_the_parameters_of_points_on_a_self_crossing_curve()
     machine = load_machine("paper-table1")
     plan = plan_block(curve_blocks(SAMPLES / "butterfly.json", machine)[0], machine)
     result = interpolate(plan)
-    u, dist = project_points(plan.curve, result.points, 1e-4, 1e-2)
+    u, dist = project_points(plan.curve, result.points, 1e-4, 1e-9, 1e-2)
     assert np.max(dist) < 1e-9
     assert np.max(np.abs(u - result.u)) < 1e-9
 
@@ -116,7 +116,7 @@ def test_projection_distance_of_points_off_the_circle_is_the_radial_offset() -> 
     radius = 50.0 + offset
     pts = np.column_stack([50 - radius * np.cos(angle), radius * np.sin(angle),
                            np.zeros(angle.size)])
-    u, dist = project_points(circle, pts, 1e-4, 1e-2)
+    u, dist = project_points(circle, pts, 1e-4, 1e-9, 1e-2)
     assert np.allclose(dist, np.abs(offset), rtol=0, atol=1e-12)
     foot = circle.point(u)
     assert np.allclose(np.arctan2(foot[:, 1], 50 - foot[:, 0]) % (2 * np.pi), angle, atol=1e-12)

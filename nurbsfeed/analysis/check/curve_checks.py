@@ -26,10 +26,13 @@ from nurbsfeed.program import CurveBlock
 # Reference: only the source's curves and the machine profile; the planner is never run. Each
 # emitted point is mapped back to its curve by projection (`projection.py`): a search that moves
 # forward from the previous point's parameter (so a self-intersecting curve is followed branch by
-# branch), brackets the foot point on g(u) = C'(u).(C(u) - P) and refines it by safeguarded
-# Gauss-Newton; a point it leaves far from the curve is looked for again over the rest of the
-# curve. A point farther than ANCHOR_ROUNDINGS * (r + delta) from the curve does not move the
-# search on, so one bad point does not derail the ones after it.
+# branch) over the local minima of |C(u) - P|, brackets each on g(u) = C'(u).(C(u) - P) and
+# bisects it. Where C' = 0 (a corner, cusp or reversal, coincident control points) g = 0 without
+# a minimum: the search goes on past it. Of the minima within r it takes the one nearest the
+# parameter's own pace (at a reversal the point after the turn is as near the way out as the way
+# back); with none within r, the nearest; a point it leaves far from the curve is looked for
+# again over the rest of the curve. A point farther than ANCHOR_ROUNDINGS * (r + delta) from the
+# curve does not move the search on, so one bad point does not derail the ones after it.
 #
 # Times: a move covering n periods ends n T after the previous one; n comes from its segment time
 # |dP^| / (F/60) (P^ the written coordinates), which must be a whole number of periods.
@@ -167,8 +170,9 @@ def check_section(section: Section, block: CurveBlock, machine: Machine,
     point_lines = np.concatenate([[section.comment_line], lines])
 
     # ---- geometry: project every point, deviation, ends, chord error, coverage ----
-    u, dist = project_points(curve, pos, 2.0 * r, ANCHOR_ROUNDINGS * (r + m.chord_error_mm))
     dev_allow = r * (1.0 + NUMERIC_REL_TOL)
+    u, dist = project_points(curve, pos, 2.0 * r, dev_allow,
+                             ANCHOR_ROUNDINGS * (r + m.chord_error_mm))
     findings.measure("path-deviation", dist[1:], 0.0, dev_allow, lines, scale)
     end_gap = float(np.linalg.norm(pos[-1] - curve.points[-1]))
     if end_gap > dev_allow:

@@ -11,13 +11,22 @@ from nurbsfeed.geometry.kernel import eval_d1, find_span
 from nurbsfeed.jit import jit
 
 PROJECT_ITERATIONS = 100
-PROJECT_SEED_REL = 1e-9  # first bracket step (of the knot range) where |C'| = 0
-# The first bracket step is at most this share of the knot range: where |C'| is nearly 0 (a
-# repeated control point) chord / |C'| would jump to the far end and bracket the wrong root.
+PROJECT_U_TOL_REL = 1e-16  # bisection ends when the bracket is this narrow (of |u| + range)
+PROJECT_SEED_REL = 1e-9  # first walking step (of the knot range) where |C'| = 0
+# Walking steps are at most this share of the knot range: where |C'| is nearly 0 (a repeated
+# control point) chord / |C'| would jump to the far end, past the foot and what follows it.
 PROJECT_STEP_MAX_REL = 1e-3
+# ... and cover at most this share of the distance to the point (or back_mm, if more).
+PROJECT_STEP_ARC_SHARE = 0.25
+# Minima within the acceptance are gathered up to this many last parameter steps ahead.
+PROJECT_WINDOW_STEPS = 3.0
 # A point the forward search leaves far from the curve is looked for again over the rest of the
 # curve: the best of this many evenly spaced parameters, refined by golden section.
 PROJECT_SCAN_SAMPLES = 4096
+# g = C'.(C - P) is taken as positive only above this many units of rounding of |C'| |C|: C is
+# computed to a few ulps of the coordinates, and near a stop the true g is smaller than that.
+PROJECT_G_NOISE_EPS = 64.0
+EPS = 2.220446049250313e-16
 GOLDEN = 0.5 * (math.sqrt(5.0) - 1.0)
 
 
@@ -29,15 +38,67 @@ def _distance2(knots, cw, degree, n_ctrl, u, span, tx, ty, tz, basis, dbasis, le
 
 
 @jit
-def _project_kernel(knots, cw, degree, targets, u_first, u_last, back_mm, anchor_mm, u_out,
-                    dist_out):
+def _probe(knots, cw, degree, n_ctrl, u, span, tx, ty, tz, basis, dbasis, left, right, p, d):
+    """Whether |C(u) - P| grows at u, and its square. Growing: g(u) = C'(u).(C(u) - P) above
+    its rounding noise. Where C' = 0 the curve stops and goes on; near a stop g is lost in the
+    rounding of C - P: neither is growing. Returns (growing, distance^2, span); leaves C(u) in
+    p."""
+    span = find_span(knots, degree, n_ctrl, u, span)
+    eval_d1(knots, cw, degree, u, span, basis, dbasis, left, right, p, d)
+    g = d[0] * (p[0] - tx) + d[1] * (p[1] - ty) + d[2] * (p[2] - tz)
+    scale = abs(p[0]) + abs(p[1]) + abs(p[2]) + abs(tx) + abs(ty) + abs(tz)
+    noise = PROJECT_G_NOISE_EPS * EPS * math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) * scale
+    return g > noise, (tx - p[0]) ** 2 + (ty - p[1]) ** 2 + (tz - p[2]) ** 2, span
+
+
+@jit
+def _golden(knots, cw, degree, n_ctrl, a, b, u, dist2, span, tx, ty, tz, basis, dbasis, left,
+            right, p, d):
+    """The least |C(u) - P|^2 on [a, b] by golden section, starting from the best so far (u,
+    dist2): returns (u, dist2, span)."""
+    for _ in range(PROJECT_ITERATIONS):
+        x1 = b - GOLDEN * (b - a)
+        x2 = a + GOLDEN * (b - a)
+        f1, span = _distance2(knots, cw, degree, n_ctrl, x1, span, tx, ty, tz, basis, dbasis,
+                              left, right, p, d)
+        f2, span = _distance2(knots, cw, degree, n_ctrl, x2, span, tx, ty, tz, basis, dbasis,
+                              left, right, p, d)
+        if f1 <= f2:
+            b = x2
+        else:
+            a = x1
+        if min(f1, f2) < dist2:
+            dist2 = min(f1, f2)
+            u = x1 if f1 <= f2 else x2
+    return u, dist2, span
+
+
+@jit
+def _project_kernel(knots, cw, degree, targets, u_first, u_last, back_mm, accept_mm, anchor_mm,
+                    u_out, dist_out):
     """Foot parameters of targets (N, 3), in order: u_out (N,), distances dist_out (N,).
 
-    Each search starts back_mm of arc behind the last anchored point (rounding may put a point
-    slightly behind the one before) and brackets g(u) = C'(u).(C(u) - P) < 0 <= g by doubling
-    steps; a target beyond the end projects to u_last. A point left farther than anchor_mm is
-    looked for again on a grid over the rest of the curve (a dropped stretch of moves puts the
-    next point far ahead). A point within anchor_mm becomes the anchor.
+    The search walks forward from the origin, back_mm of arc behind the last anchored point
+    (rounding may put a point slightly behind the one before), by steps that double up to
+    PROJECT_STEP_MAX_REL of the knot range and cover at most PROJECT_STEP_ARC_SHARE of the
+    distance to P (and back_mm). Its candidates are the local minima of |C(u) - P|: the origin
+    where the distance grows there; each step over which g(u) = C'(u).(C(u) - P) turns positive,
+    bisected; each step that ends farther than it began without g turning (it ends on a stop),
+    by golden section; and the curve end where the distance still falls there.
+
+    Where C' = 0 (a corner, a cusp or reversal, a zero-length span of coincident control points)
+    g = 0 too, but the distance need not be least there: the curve stops and goes on. So only g
+    above its rounding noise counts as growing, and a step is bisected, never refined by Newton:
+    near a stop g/g' shrinks geometrically towards the stop itself and Newton would settle there.
+
+    At a reversal the point just after the turn is as near the way out as the way back. The
+    choice follows the parameter's own pace: minima within accept_mm are gathered up to
+    PROJECT_WINDOW_STEPS last parameter steps ahead of the anchor, and the one nearest the anchor
+    plus the last step is taken (u(t) passes a reversal at a finite rate while C' = 0). With none
+    within accept_mm the walk goes on for twice the chord from the anchor plus back_mm (past a
+    corner the foot is about that far) and takes the nearest minimum. A point left farther than
+    anchor_mm is looked for again on a grid over the rest of the curve (a dropped stretch of moves
+    puts the next point far ahead). A point within anchor_mm becomes the anchor.
     """
     n_ctrl = cw.shape[0]
     basis = np.empty(degree + 1)
@@ -48,7 +109,10 @@ def _project_kernel(knots, cw, degree, targets, u_first, u_last, back_mm, anchor
     d = np.empty(3)
     seed = (u_last - u_first) * PROJECT_SEED_REL
     step_max = (u_last - u_first) * PROJECT_STEP_MAX_REL
+    u_tol = PROJECT_U_TOL_REL * (abs(u_first) + abs(u_last) + u_last - u_first)
+    accept2 = accept_mm * accept_mm
     anchor = u_first
+    pace = 0.0  # the last anchored parameter step, at most step_max
     span = find_span(knots, degree, n_ctrl, u_first, degree)
     for i in range(targets.shape[0]):
         tx = targets[i, 0]
@@ -61,46 +125,95 @@ def _project_kernel(knots, cw, degree, targets, u_first, u_last, back_mm, anchor
         origin = anchor
         step = seed
         if speed > 0.0:
-            origin = max(u_first, anchor - back_mm / speed)
+            # near a stop back_mm / speed is no measure of arc: step_max bounds the way back
+            origin = max(u_first, anchor - min(step_max, back_mm / speed))
             step = min(step_max, max(seed, (chord + back_mm) / speed))
-        lo = origin
-        hi = origin
-        found = False
-        while True:
-            hi = min(origin + step, u_last)
-            span = find_span(knots, degree, n_ctrl, hi, span)
-            eval_d1(knots, cw, degree, hi, span, basis, dbasis, left, right, p, d)
-            g = d[0] * (p[0] - tx) + d[1] * (p[1] - ty) + d[2] * (p[2] - tz)
-            if g >= 0.0:
-                found = True
-                break
-            lo = hi
-            if hi >= u_last:
-                break
-            step *= 2.0
+        predicted = anchor + pace
+        window_end = anchor + PROJECT_WINDOW_STEPS * pace
         u = u_last
-        if found:
-            u = hi
-            for _ in range(PROJECT_ITERATIONS):
-                span = find_span(knots, degree, n_ctrl, u, span)
-                eval_d1(knots, cw, degree, u, span, basis, dbasis, left, right, p, d)
-                g = d[0] * (p[0] - tx) + d[1] * (p[1] - ty) + d[2] * (p[2] - tz)
-                if g > 0.0:
-                    hi = u
-                elif g < 0.0:
-                    lo = u
-                else:
-                    break
-                gp = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]  # Gauss-Newton: |C'|^2
-                nu = u - g / gp if gp > 0.0 else 0.5 * (lo + hi)
-                if not lo < nu < hi:
-                    nu = 0.5 * (lo + hi)
-                if abs(nu - u) <= 1e-16 * (abs(u) + u_last - u_first) or hi - lo <= 0.0:
-                    u = nu
-                    break
-                u = nu
-        dist2, span = _distance2(knots, cw, degree, n_ctrl, u, span, tx, ty, tz, basis, dbasis,
-                                 left, right, p, d)
+        dist2 = math.inf
+        chosen = False
+        n_minima = 0
+        reach_mm = 2.0 * (chord + back_mm)
+        walked_mm = 0.0
+        lo = origin
+        rising, d2_lo, span = _probe(knots, cw, degree, n_ctrl, lo, span, tx, ty, tz, basis,
+                                     dbasis, left, right, p, d)
+        wx = p[0]
+        wy = p[1]
+        wz = p[2]
+        speed_lo = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        at_end = False
+        while True:
+            candidate = -1.0
+            dc = math.inf
+            if rising and n_minima == 0 and lo == origin:
+                candidate = origin
+                dc = d2_lo
+            else:
+                rising_lo = rising
+                # two minima within one step would leave the first unseen; a step whose chord
+                # or trapezoid arc is too long is halved
+                arc_max = max(back_mm, PROJECT_STEP_ARC_SHARE * math.sqrt(d2_lo))
+                while True:
+                    hi = min(lo + step, u_last)
+                    rising, d2_hi, span = _probe(knots, cw, degree, n_ctrl, hi, span, tx, ty,
+                                                 tz, basis, dbasis, left, right, p, d)
+                    speed_hi = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+                    chord_mm = math.sqrt((p[0] - wx) ** 2 + (p[1] - wy) ** 2 + (p[2] - wz) ** 2)
+                    arc_mm = max(chord_mm, 0.5 * (hi - lo) * (speed_lo + speed_hi))
+                    if arc_mm <= arc_max or step <= seed:
+                        break
+                    step *= 0.5
+                speed_lo = speed_hi
+                walked_mm += chord_mm
+                wx = p[0]
+                wy = p[1]
+                wz = p[2]
+                if rising and not rising_lo:
+                    a = lo
+                    b = hi
+                    for _ in range(PROJECT_ITERATIONS):
+                        mid = 0.5 * (a + b)
+                        if b - a <= u_tol or not a < mid < b:
+                            break
+                        up, _d2, span = _probe(knots, cw, degree, n_ctrl, mid, span, tx, ty, tz,
+                                               basis, dbasis, left, right, p, d)
+                        if up:
+                            b = mid
+                        else:
+                            a = mid
+                    candidate = b
+                    dc, span = _distance2(knots, cw, degree, n_ctrl, b, span, tx, ty, tz, basis,
+                                          dbasis, left, right, p, d)
+                elif not rising_lo and d2_hi > d2_lo:
+                    # falling at lo, farther at hi, yet not rising there: hi is a stop (C' = 0)
+                    # or g is lost in rounding, and the minimum between is found on the distance
+                    candidate, dc, span = _golden(knots, cw, degree, n_ctrl, lo, hi, lo, d2_lo,
+                                                  span, tx, ty, tz, basis, dbasis, left, right,
+                                                  p, d)
+                elif hi >= u_last and not rising:
+                    candidate = u_last
+                    dc = d2_hi
+                lo = hi
+                d2_lo = d2_hi
+                at_end = hi >= u_last
+                step = min(2.0 * step, step_max)
+            if candidate >= 0.0:
+                n_minima += 1
+                if dc <= accept2:
+                    if not chosen or abs(candidate - predicted) < abs(u - predicted):
+                        u = candidate
+                        dist2 = dc
+                    chosen = True
+                elif not chosen and dc < dist2:
+                    u = candidate
+                    dist2 = dc
+            if at_end or (n_minima > 0 and lo >= window_end and (chosen or walked_mm > reach_mm)):
+                break
+        if n_minima == 0:
+            dist2, span = _distance2(knots, cw, degree, n_ctrl, u, span, tx, ty, tz, basis,
+                                     dbasis, left, right, p, d)
         if dist2 > anchor_mm * anchor_mm:
             width = (u_last - origin) / (PROJECT_SCAN_SAMPLES - 1)
             best = -1
@@ -111,35 +224,27 @@ def _project_kernel(knots, cw, degree, targets, u_first, u_last, back_mm, anchor
                     dist2 = dq
                     best = q
             if best >= 0:
-                a = max(origin, origin + (best - 1) * width)
-                b = min(u_last, origin + (best + 1) * width)
-                u = origin + best * width
-                for _ in range(PROJECT_ITERATIONS):
-                    x1 = b - GOLDEN * (b - a)
-                    x2 = a + GOLDEN * (b - a)
-                    f1, span = _distance2(knots, cw, degree, n_ctrl, x1, span, tx, ty, tz, basis,
-                                          dbasis, left, right, p, d)
-                    f2, span = _distance2(knots, cw, degree, n_ctrl, x2, span, tx, ty, tz, basis,
-                                          dbasis, left, right, p, d)
-                    if f1 <= f2:
-                        b = x2
-                    else:
-                        a = x1
-                    if min(f1, f2) < dist2:
-                        dist2 = min(f1, f2)
-                        u = x1 if f1 <= f2 else x2
+                u, dist2, span = _golden(knots, cw, degree, n_ctrl,
+                                         max(origin, origin + (best - 1) * width),
+                                         min(u_last, origin + (best + 1) * width),
+                                         origin + best * width, dist2, span, tx, ty, tz, basis,
+                                         dbasis, left, right, p, d)
         u_out[i] = u
         dist_out[i] = math.sqrt(dist2)
         if dist_out[i] <= anchor_mm:
+            pace = min(step_max, max(0.0, u - anchor))
             anchor = u
 
 
-def project_points(curve: NurbsCurve, targets: np.ndarray, back_mm: float,
+def project_points(curve: NurbsCurve, targets: np.ndarray, back_mm: float, accept_mm: float,
                    anchor_mm: float) -> tuple[np.ndarray, np.ndarray]:
-    """Foot parameters and distances of ordered points (N, 3) on the curve: two (N,) arrays."""
+    """Foot parameters and distances of ordered points (N, 3) on the curve: two (N,) arrays.
+
+    back_mm: how far behind the last anchored point a foot may be; accept_mm: a minimum this near
+    counts as on the curve; anchor_mm: a point this near moves the search on."""
     u = np.empty(len(targets))
     dist = np.empty(len(targets))
     _project_kernel(curve.knots, curve.homogeneous, curve.degree,
                     np.ascontiguousarray(targets, dtype=float), curve.u_min, curve.u_max,
-                    back_mm, anchor_mm, u, dist)
+                    back_mm, accept_mm, anchor_mm, u, dist)
     return u, dist
