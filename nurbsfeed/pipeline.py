@@ -19,6 +19,7 @@ import numpy as np
 
 from nurbsfeed.errors import InputError, Location
 from nurbsfeed.gcode.writer import MoveWriter, cycle_comment
+from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.interpolate import Interpolation, interpolate
 from nurbsfeed.json_reader import json_program
 from nurbsfeed.machine import Machine
@@ -87,10 +88,12 @@ def plan_block(block: CurveBlock, machine: Machine) -> Plan:
     return plan_curve(block.curve, lim, block.feed_u, block.feed_mm_s)
 
 
-def write_trace_rows(out: BinaryIO, curve_index: int, result: Interpolation) -> None:
-    """Trace rows (SPEC §5) at full precision."""
+def write_trace_rows(out: BinaryIO, curve_index: int, result: Interpolation,
+                     curve: NurbsCurve) -> None:
+    """Trace rows (SPEC §5) at full precision; u in the input's own knot range."""
     n = result.n_points
-    table = np.column_stack([np.full(n, curve_index), np.arange(n), result.t_s, result.u,
+    table = np.column_stack([np.full(n, curve_index), np.arange(n), result.t_s,
+                             curve.input_u(result.u),
                              result.s_mm, result.v_mm_s, result.a_mm_s2, result.j_mm_s3,
                              result.points])
     np.savetxt(out, table, delimiter=",", fmt=["%d", "%d"] + ["%.17g"] * 9)
@@ -137,7 +140,7 @@ def convert_block(block: CurveBlock, index: int, out: BinaryIO, machine: Machine
         if block.feed_word_after:
             out.write(block.feed_word_after.encode(ENCODING, ERRORS) + eol)
     if trace is not None:
-        write_trace_rows(trace, index, interp)
+        write_trace_rows(trace, index, interp, block.curve)
     return CurveResult(index, block.curve.name, block.location, interp.n_points, moves,
                        plan.length_mm, plan.cycle_time_s, block.units)
 

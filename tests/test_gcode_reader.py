@@ -18,6 +18,7 @@ from nurbsfeed.gcode import point_lines, read_gcode
 from nurbsfeed.gcode.fanuc import _POINT_LINE, NurbsCurveReader
 from nurbsfeed.gcode.linuxcnc import uniform_knots
 from nurbsfeed.gcode.point_lines import RUN_LINES, _number, scan_point_lines
+from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.program import CurveBlock, PassThrough
 from tests.bench.programs import fanuc_program
 
@@ -58,11 +59,15 @@ def only_curve(text: str, dialect: str = "auto") -> CurveBlock:
 
 def assert_curve(block: CurveBlock, degree: int, knots: list, points: list,
                  weights: list | None = None) -> None:
+    """The block's curve is the one these fields build (its knots on [0, 1], the input's range
+    in u_origin and u_scale; its weights scaled by a power of two)."""
     curve = block.curve
+    expected = NurbsCurve.build(degree, knots, points, weights)
     assert curve.degree == degree
-    np.testing.assert_array_equal(curve.knots, knots)
+    assert (curve.u_origin, curve.u_scale) == (knots[0], knots[-1] - knots[0])
+    np.testing.assert_array_equal(curve.knots, expected.knots)
     np.testing.assert_array_equal(curve.points, points)
-    np.testing.assert_array_equal(curve.weights, weights or [1.0] * len(points))
+    np.testing.assert_array_equal(curve.weights, expected.weights)
 
 
 # ---- the samples, against hand-derived curves ---------------------------------------------------

@@ -372,8 +372,8 @@ class NurbsCurveReader:
         self._flush_decimal_texts()
         curve = build_curve(self.order - 1, self.knots, self.points, self.weights, self.name,
                             self.location)
-        feed_u, feed_mm_s = feed_steps(curve.u_min, curve.u_max, self.feed_before, self.changes,
-                                       self.state, self.location)
+        feed_u, feed_mm_s = feed_steps(curve, self.feed_before, self.changes, self.state,
+                                       self.location)
         end = {axis: AxisPos(self.points[-1][i], self.decimals.get(axis))
                for i, axis in enumerate(AXES)}
         return FinishedCurve(curve, self.location, feed_u, feed_mm_s, end, self.feed, G6_2)

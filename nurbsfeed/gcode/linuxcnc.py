@@ -163,8 +163,7 @@ class G52BlockReader:
         curve = build_curve(self.order - 1, knots, self.points, self.weights, self.name,
                             self.location)
         feed = self.state.feed
-        feed_u, feed_mm_s = feed_steps(curve.u_min, curve.u_max, feed, [], self.state,
-                                       self.location)
+        feed_u, feed_mm_s = feed_steps(curve, feed, [], self.state, self.location)
         end = {axis: AxisPos(self.points[-1][i], self.decimals[axis])
                for i, axis in enumerate(AXES)}
         return FinishedCurve(curve, self.location, feed_u, feed_mm_s, end, feed, None)
