@@ -137,6 +137,18 @@ def test_linuxcnc_g62_with_q_and_g62_knot_lines() -> None:
     assert block.feed_word_after == "F2500."
 
 
+def test_orders_at_the_envelope_edge_are_read() -> None:
+    """P10 / L10 (degree 9), the highest order nurbsfeed accepts (README "Input envelope");
+    P11 / L11 are refused at the word (tests/data/bad_gcode/*-order-above-envelope.nc)."""
+    points = [[float(i), float(i % 3), 0.0] for i in range(10)]
+    g62 = PREAMBLE + "G6.2 P10 Q1 K0 X0 Y0 F1200\n" + "".join(
+        f"K0 X{x:g} Y{y:g}\n" for x, y, _ in points[1:]) + "G6.2 K1\n" * 10 + "G0 Z5\n"
+    assert_curve(only_curve(g62), 9, [0.0] * 10 + [1.0] * 10, points)
+    g52 = PREAMBLE + "G5.2 L10\n" + "".join(f"X{x:g} Y{y:g} P1\n" for x, y, _ in points[1:]) + \
+        "G5.3\nG0 Z5\n"
+    assert_curve(only_curve(g52), 9, uniform_knots(10, 10), points)
+
+
 def test_inch_program_keeps_inches() -> None:
     (block,) = curves(read(load(SAMPLES / "inch-program.nc")))
     assert block.units == "in"
@@ -398,7 +410,11 @@ def test_bad_input(path: Path) -> None:
 
 
 CURVE_ERRORS = {"fanuc-fewer-control-points", "fanuc-knot-decreasing", "fanuc-end-not-clamped",
-                "fanuc-weight-zero", "linuxcnc-g5-2-weight-zero"}
+                "fanuc-weight-zero", "linuxcnc-g5-2-weight-zero",
+                "fanuc-control-point-beyond-envelope", "fanuc-control-point-beyond-envelope-in-run",
+                "fanuc-current-position-beyond-envelope", "fanuc-knot-span-beyond-envelope",
+                "fanuc-weight-ratio-beyond-envelope",
+                "linuxcnc-g5-2-current-position-beyond-envelope"}
 
 
 @pytest.mark.parametrize("name", sorted(CURVE_ERRORS))

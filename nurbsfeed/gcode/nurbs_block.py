@@ -23,6 +23,9 @@ from nurbsfeed.gcode.modal import (
 )
 from nurbsfeed.gcode.tokenizer import Block, Word
 from nurbsfeed.geometry import NurbsCurve
+from nurbsfeed.geometry.nurbs import MAX_DEGREE, far_control_point, far_message
+
+MAX_ORDER = MAX_DEGREE + 1  # the highest P / L accepted (README "Input envelope")
 
 
 @dataclass(frozen=True)
@@ -130,6 +133,16 @@ def build_curve(degree: int, knots: list[float], points: list[tuple[float, float
         return NurbsCurve.build(degree, knots, points, weights, name)
     except CurveError as exc:
         raise exc.at(start) from None
+
+
+def check_coordinates(points: list[tuple[float, float, float]], lines: list[int],
+                      start: Location) -> None:
+    """NurbsCurve.build's coordinate check, its CurveError placed on the control point's line
+    (lines[i]; point 0, the curve's start, at the block start)."""
+    far = far_control_point(np.array(points))
+    if far is not None:
+        where = start if far == 0 else Location(start.file, lines[far], 1)
+        raise CurveError(far_message(far, points[far]), where)
 
 
 def count(n: int, noun: str) -> str:
