@@ -264,7 +264,8 @@ def plan(input: Path, dialect: str, **kwargs: Any) -> None:
         click.echo(f"  {'#':>3} {'kind':<6} {'u':>12} {'s':>12} {'kappa':>12} "
                    f"{'nominal':>10} {'scanned':>10}")
         for k, node in enumerate(p.key_node):
-            click.echo(f"  {k:>3} {KIND_NAMES[int(p.key_kind[k])]:<6} {p.grid.u[node]:>12.8f} "
+            click.echo(f"  {k:>3} {KIND_NAMES[int(p.key_kind[k])]:<6} "
+                       f"{item.curve.input_u(p.grid.u[node]):>12.8f} "
                        f"{p.grid.s_mm[node]:>12.6f} {p.grid.kappa_1_mm[node]:>12.6g} "
                        f"{p.key_nominal_mm_s[k]:>10.4f} {p.key_v_mm_s[k]:>10.4f}")
         a, j = lim.acc_mm_s2, lim.jerk_mm_s3

@@ -1,4 +1,4 @@
-"""JSON curves (SPEC §4) read as a complete program: header, units, a rapid to each curve start.
+"""JSON curves (design §4) read as a complete program: header, units, a rapid to each curve start.
 
 Semantic errors point at the key of the offending field in the file (the i-th occurrence of
 `"weights"` for curve i), since json does not report positions of values.

@@ -21,6 +21,7 @@ import numpy as np
 
 from nurbsfeed.errors import CurveError, InputError, Location
 from nurbsfeed.gcode.writer import MoveWriter, cycle_comment
+from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.interpolate import PointChunk, Stepping
 from nurbsfeed.json_reader import json_program
 from nurbsfeed.machine import Machine
@@ -97,14 +98,16 @@ def plan_block(block: CurveBlock, machine: Machine) -> Plan:
 
 
 def write_trace_rows(out: BinaryIO, curve_index: int, chunk: PointChunk, period_s: float,
-                     s_mm: float) -> float:
-    """Trace rows (design §5) of one chunk of points at full precision; s_mm: the arc at the point
-    before the chunk (0 before the first). Returns the arc at its last point."""
+                     s_mm: float, curve: NurbsCurve) -> float:
+    """Trace rows (design §5) of one chunk of points at full precision, u in the input's own
+    knot range (curve.input_u); s_mm: the arc at the point before the chunk (0 before the
+    first). Returns the arc at its last point."""
     n = chunk.u.size
     s = np.cumsum(np.concatenate(([s_mm], chunk.ds_mm)))[1:]
     v, a, j = chunk.kinematics()
     table = np.column_stack([np.full(n, curve_index), np.arange(chunk.k0, chunk.k0 + n),
-                             np.arange(chunk.k0, chunk.k0 + n, dtype=float) * period_s, chunk.u,
+                             np.arange(chunk.k0, chunk.k0 + n, dtype=float) * period_s,
+                             curve.input_u(chunk.u),
                              s, v, a, j, chunk.points])
     # the rows as np.savetxt writes them, which builds a class per call: garbage that only the
     # cyclic collector frees, a call per chunk
@@ -169,7 +172,7 @@ def convert_block(block: CurveBlock, index: int, out: BinaryIO, machine: Machine
         if writer is not None and chunk.stretch is not None:  # not the first point: the start
             writer.add_points(chunk.points)
         if trace is not None:
-            s_mm = write_trace_rows(trace, index, chunk, period_s, s_mm)
+            s_mm = write_trace_rows(trace, index, chunk, period_s, s_mm, block.curve)
     moves = 0
     if writer is not None:
         writer.end_curve()

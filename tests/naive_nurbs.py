@@ -8,6 +8,7 @@ and the quotient rule for the rational curve. Slow and obviously right.
 from __future__ import annotations
 
 import math
+from fractions import Fraction
 
 import numpy as np
 
@@ -59,6 +60,58 @@ def evaluate(degree: int, knots, points, weights, u: float):
     c1 = (a[1] - wd[1] * c0) / wd[0]
     c2 = (a[2] - 2.0 * wd[1] * c1 - wd[2] * c0) / wd[0]
     return c0, c1, c2
+
+
+def exact_evaluate(degree: int, knots, points, weights, u: float | Fraction) -> np.ndarray:
+    """C, C', C'' at u (derivatives in the input's own u) as a (3, 3) array, computed exactly in
+    rational arithmetic from the given doubles and rounded once at the end: Cox-de Boor in
+    `fractions.Fraction`, the right end in the last span. The reference at the input envelope's
+    edges, where the float evaluator above would itself lose digits."""
+    k = [Fraction(float(x)) for x in knots]
+    uf = u if isinstance(u, Fraction) else Fraction(float(u))
+    n_ctrl = len(points)
+    last = k[-1]
+    # basis[p][i] = N_{i,p}(u); the half-open convention, the right end closed
+    if uf >= last:
+        span = max(i for i in range(len(k) - 1) if k[i] < k[i + 1])
+    else:
+        span = max(i for i in range(len(k) - 1) if k[i] <= uf < k[i + 1])
+    table = [[Fraction(1) if i == span else Fraction(0) for i in range(len(k) - 1)]]
+    for p in range(1, degree + 1):
+        row = []
+        for i in range(len(k) - 1 - p):
+            value = Fraction(0)
+            if k[i + p] != k[i]:
+                value += (uf - k[i]) / (k[i + p] - k[i]) * table[p - 1][i]
+            if k[i + p + 1] != k[i + 1]:
+                value += (k[i + p + 1] - uf) / (k[i + p + 1] - k[i + 1]) * table[p - 1][i + 1]
+            row.append(value)
+        table.append(row)
+
+    def ders(i: int, p: int, order: int) -> Fraction:
+        if order == 0:
+            return table[p][i]
+        value = Fraction(0)
+        if k[i + p] != k[i]:
+            value += p * ders(i, p - 1, order - 1) / (k[i + p] - k[i])
+        if k[i + p + 1] != k[i + 1]:
+            value -= p * ders(i + 1, p - 1, order - 1) / (k[i + p + 1] - k[i + 1])
+        return value
+
+    pts = [[Fraction(float(c)) for c in point] for point in points]
+    w = [Fraction(float(x)) for x in weights]
+    a = [[Fraction(0)] * 3 for _ in range(3)]
+    wd = [Fraction(0)] * 3
+    for i in range(max(span - degree, 0), min(span + 1, n_ctrl)):
+        for order in range(3):
+            n = ders(i, degree, order) if order <= degree else Fraction(0)
+            wd[order] += n * w[i]
+            for c in range(3):
+                a[order][c] += n * w[i] * pts[i][c]
+    c0 = [a[0][c] / wd[0] for c in range(3)]
+    c1 = [(a[1][c] - wd[1] * c0[c]) / wd[0] for c in range(3)]
+    c2 = [(a[2][c] - 2 * wd[1] * c1[c] - wd[2] * c0[c]) / wd[0] for c in range(3)]
+    return np.array([[float(x) for x in c0], [float(x) for x in c1], [float(x) for x in c2]])
 
 
 def curvature(c1: np.ndarray, c2: np.ndarray) -> float:

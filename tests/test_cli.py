@@ -6,6 +6,7 @@ import csv
 import re
 import difflib
 import io
+import json
 import os
 import subprocess
 import sys
@@ -17,6 +18,7 @@ from click.testing import CliRunner
 
 from nurbsfeed.cli import main
 from nurbsfeed.jit import JIT_ENABLED
+from nurbsfeed.json_reader import read_json_curves
 from tests.conftest import ROOT, SAMPLES
 from tests.gcode_parse import moves
 
@@ -143,6 +145,24 @@ BAD_JSON = [
      "weights)"),
     ('{"degree": 1, "knots": [0,0,1,1], "control_points": [[0,0],[1,NaN]]}',
      "1:63: not valid JSON: NaN is not a number JSON allows"),
+    # just outside the input envelope (README "Input envelope"), refused before any work
+    ('{"degree": 1000000000000, "knots": [0, 1], "control_points": [[0, 0]]}',
+     "1:2: curves[0]: degree 1000000000000 is above 9, the highest nurbsfeed evaluates "
+     "accurately"),
+    ('{"curves": [{"degree": 1, "knots": [0,0,1,1], "control_points": [[0,0],[1,1]]},\n'
+     ' {"degree": 10, "knots": [], "control_points": []}]}',
+     "2:3: curves[1]: degree 10 is above 9, the highest nurbsfeed evaluates accurately"),
+    ('{"degree": 1, "knots": [0,0,1,1],\n "control_points": [[0,0],[1000000.001,1]]}',
+     "2:2: curves[0]: control point 1 [1000000.001, 1.0] has a coordinate beyond +-1000000, "
+     "the range nurbsfeed converts"),
+    ('{"degree": 2, "knots": [0,0,0,1,1,1], "control_points": [[0,0],[1,1],[2,0]],\n'
+     ' "weights": [1, 1000.5, 1]}',
+     "2:2: curves[0]: weight 1 (1000.5) is more than 1000 times weight 0 (1); nurbsfeed plans "
+     "curves up to that ratio"),
+    ('{"degree": 1, "knots": [5,5,6,6.000000000001,7,7],\n'
+     ' "control_points": [[0,0],[1,1],[2,0],[3,1]]}',
+     "1:15: curves[0]: knot span 6.0 .. 6.000000000001 is 5.0e-13 of the knot range; at least "
+     "1e-12"),
 ]
 
 
@@ -331,3 +351,71 @@ def test_progress_bar_only_on_a_terminal(tmp_path: Path) -> None:
 
 BUTTERFLY_CURVE = (SAMPLES / "butterfly.json").read_text().split('"curves": [')[1].rsplit("]", 1)[0]
 BUTTERFLIES = '{{"units": "mm", "curves": [{}]}}'
+
+
+def _curve_off_chords_mm(curve, u: np.ndarray, points: np.ndarray, sub: int = 8) -> float:
+    """How far the curve between consecutive parameters u_k strays from the chord between the
+    points written for them: (N,), (N, 3) -> the largest distance."""
+    f = np.arange(1, sub) / sub
+    between = curve.point((u[:-1, None] + np.diff(u)[:, None] * f).ravel()).reshape(-1, sub - 1, 3)
+    a, ab = points[:-1, None, :], np.diff(points, axis=0)[:, None, :]
+    t = np.clip(np.sum((between - a) * ab, axis=2) / np.maximum(np.sum(ab * ab, axis=2), 1e-300),
+                0.0, 1.0)
+    return float(np.max(np.linalg.norm(a + t[..., None] * ab - between, axis=2)))
+
+
+def _edge_curves() -> dict[str, dict]:
+    rng = np.random.default_rng(12)
+
+    def curve(degree: int, n: int, lo: float = 0.0, width: float = 1.0, offset: float = 0.0,
+              weights=None) -> dict:
+        interior = np.sort(rng.uniform(0.05, 0.95, n - degree - 1))
+        knots = lo + width * np.concatenate([np.zeros(degree + 1), interior, np.ones(degree + 1)])
+        points = offset + np.cumsum(rng.uniform(2.0, 4.0, (n, 2)) * [1, rng.choice([-1, 1])],
+                                    axis=0)
+        return {"degree": degree, "knots": knots.tolist(), "control_points": points.tolist(),
+                "weights": rng.uniform(0.5, 2.0, n).tolist() if weights is None else weights,
+                "feed": 3000}
+
+    span = curve(3, 8)
+    span["knots"][5] = span["knots"][4] + 1.01e-12
+    span["knots"][4:6] = sorted(span["knots"][4:6])
+    return {"degree 9": curve(9, 12),
+            "weight ratio 1000, heavy": curve(3, 6, weights=[1, 1, 1000, 1, 1, 1]),
+            "weight ratio 1000, light": curve(3, 6, weights=[1, 1e-3, 1e-3, 1, 1, 1]),
+            "narrowest knot span": span,
+            "coordinates near 1e6": curve(3, 8, offset=1e6 - 100.0),
+            "coordinates near -1e6": curve(3, 8, offset=-1e6 + 10.0),
+            "knot range 1e-6": curve(3, 8, width=1e-6),
+            "knot range 1e6": curve(3, 8, width=1e6),
+            "knots [1e6, 1e6 + 1]": curve(3, 8, lo=1e6)}
+
+
+EDGE_CURVES = _edge_curves()
+
+
+@pytest.mark.parametrize("name", list(EDGE_CURVES))
+def test_conversions_at_the_envelope_edges_write_points_on_the_curve(tmp_path: Path,
+                                                                     name: str) -> None:
+    """At each edge of the input envelope: exit 0; every written point is the curve's point at
+    its trace u (given in the input's own knot range) to the output's rounding; the curve
+    between consecutive points stays within the chord tolerance of the move; no move is
+    longer than the feed allows in one period."""
+    src, out, trace = tmp_path / "edge.json", tmp_path / "edge.nc", tmp_path / "edge.csv"
+    src.write_text(json.dumps(EDGE_CURVES[name]))
+    code, _, stderr = run("convert", str(src), "-o", str(out), "--trace", str(trace), "-q")
+    assert code == 0, stderr
+    curve = read_json_curves(src, src.read_text())[1][0][0]
+    table = np.loadtxt(trace, delimiter=",", skiprows=1)
+    u_input, points = table[:, 3], table[:, 8:11]
+    assert u_input[0] == curve.u_origin and np.all(np.diff(u_input) >= 0)
+    assert u_input[-1] == pytest.approx(curve.u_origin + curve.u_scale, rel=1e-15)
+    u = (u_input - curve.u_origin) / curve.u_scale
+    rounding_mm = np.sqrt(3) / 2 * 1e-4  # default profile: 4 decimals
+    assert np.max(np.linalg.norm(curve.point(u) - points, axis=1)) <= 1e-9 * (
+        1 + np.max(np.abs(points)))
+    written, _, _ = moves(out.read_text(), np.round(points[0], 4))
+    assert np.array_equal(written, np.round(points[1:], 4)[np.any(
+        np.diff(np.round(points, 4), axis=0) != 0, axis=1)])
+    assert _curve_off_chords_mm(curve, u, points) <= 0.001 + rounding_mm  # chord_error_mm
+    assert np.max(np.linalg.norm(np.diff(points, axis=0), axis=1)) <= 50.0 * 0.001 * (1 + 1e-6)

@@ -18,6 +18,7 @@ from nurbsfeed.gcode import point_lines, read_gcode
 from nurbsfeed.gcode.fanuc import _POINT_LINE, NurbsCurveReader
 from nurbsfeed.gcode.linuxcnc import uniform_knots
 from nurbsfeed.gcode.point_lines import RUN_LINES, _number, scan_point_lines
+from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.program import CurveBlock, PassThrough
 from tests.bench.programs import fanuc_program
 
@@ -58,11 +59,15 @@ def only_curve(text: str, dialect: str = "auto") -> CurveBlock:
 
 def assert_curve(block: CurveBlock, degree: int, knots: list, points: list,
                  weights: list | None = None) -> None:
+    """The block's curve is the one these fields build (its knots on [0, 1], the input's range
+    in u_origin and u_scale; its weights scaled by a power of two)."""
     curve = block.curve
+    expected = NurbsCurve.build(degree, knots, points, weights)
     assert curve.degree == degree
-    np.testing.assert_array_equal(curve.knots, knots)
+    assert (curve.u_origin, curve.u_scale) == (knots[0], knots[-1] - knots[0])
+    np.testing.assert_array_equal(curve.knots, expected.knots)
     np.testing.assert_array_equal(curve.points, points)
-    np.testing.assert_array_equal(curve.weights, weights or [1.0] * len(points))
+    np.testing.assert_array_equal(curve.weights, expected.weights)
 
 
 # ---- the samples, against hand-derived curves ---------------------------------------------------
@@ -130,6 +135,18 @@ def test_linuxcnc_g62_with_q_and_g62_knot_lines() -> None:
     assert_curve(block, 3, [0, 0, 0, 0, 1, 1, 1, 1],
                  [[0, 0, -1], [10, 30, -1], [40, 30, -1], [50, 0, -1]])
     assert block.feed_word_after == "F2500."
+
+
+def test_orders_at_the_envelope_edge_are_read() -> None:
+    """P10 / L10 (degree 9), the highest order nurbsfeed accepts (README "Input envelope");
+    P11 / L11 are refused at the word (tests/data/bad_gcode/*-order-above-envelope.nc)."""
+    points = [[float(i), float(i % 3), 0.0] for i in range(10)]
+    g62 = PREAMBLE + "G6.2 P10 Q1 K0 X0 Y0 F1200\n" + "".join(
+        f"K0 X{x:g} Y{y:g}\n" for x, y, _ in points[1:]) + "G6.2 K1\n" * 10 + "G0 Z5\n"
+    assert_curve(only_curve(g62), 9, [0.0] * 10 + [1.0] * 10, points)
+    g52 = PREAMBLE + "G5.2 L10\n" + "".join(f"X{x:g} Y{y:g} P1\n" for x, y, _ in points[1:]) + \
+        "G5.3\nG0 Z5\n"
+    assert_curve(only_curve(g52), 9, uniform_knots(10, 10), points)
 
 
 def test_inch_program_keeps_inches() -> None:
@@ -393,7 +410,11 @@ def test_bad_input(path: Path) -> None:
 
 
 CURVE_ERRORS = {"fanuc-fewer-control-points", "fanuc-knot-decreasing", "fanuc-end-not-clamped",
-                "fanuc-weight-zero", "linuxcnc-g5-2-weight-zero"}
+                "fanuc-weight-zero", "linuxcnc-g5-2-weight-zero",
+                "fanuc-control-point-beyond-envelope", "fanuc-control-point-beyond-envelope-in-run",
+                "fanuc-current-position-beyond-envelope", "fanuc-knot-span-beyond-envelope",
+                "fanuc-weight-ratio-beyond-envelope",
+                "linuxcnc-g5-2-current-position-beyond-envelope"}
 
 
 @pytest.mark.parametrize("name", sorted(CURVE_ERRORS))

@@ -31,14 +31,18 @@ block arrives; the message names the alarm a controller would raise.
 - Not under G41/G42 or G93/G95 (PS1006). Other commands (M, S, T, G codes other than G06.2)
   cannot be specified inside the curve ("commands other than NURBS interpolation cannot be
   specified"), and parameter assignments are refused because the block is replaced.
-- An F word on control point j holds from the span starting at knot j on (SPEC §3a).
+- An F word on control point j holds from the span starting at knot j on (design §3a).
 - G06.2 is modal (group 01): after the knot-only blocks, a block with K and axis words starts the
   next curve; G0/G1/G2/G3 end the mode.
 
 LinuxCNC's G6.2 (`linuxcnc=True`) follows the same block structure with these differences: a Q
 word (interpolation method, no effect on the geometry) on the first block, knot-only lines
-written `G6.2 K_` (the G6.2 word may appear on any line of the curve), any order P >= 2, and
+written `G6.2 K_` (the G6.2 word may appear on any line of the curve), any order P from 2 to
+nurbs_block.MAX_ORDER (LinuxCNC sets no maximum; nurbsfeed's input envelope does), and
 incremental G91 control points refused, since their meaning is not documented for LinuxCNC.
+
+A control point beyond the coordinate envelope (geometry.nurbs.MAX_COORDINATE) is reported on
+its own line; the other envelope checks of NurbsCurve.build at the first block.
 """
 
 from __future__ import annotations
@@ -49,10 +53,12 @@ import re
 from nurbsfeed.errors import CurveError, InputError
 from nurbsfeed.gcode.modal import AXES, G6_2, AxisPos, ModalState, tolerance
 from nurbsfeed.gcode.nurbs_block import (
+    MAX_ORDER,
     FeedChange,
     FinishedCurve,
     build_curve,
     check_block,
+    check_coordinates,
     check_no_assignments,
     count,
     curve_name,
@@ -89,6 +95,7 @@ class NurbsCurveReader:
         self.last_knot: Word | None = None
         self.first_closing_knot: Word | None = None
         self.points: list[tuple[float, float, float]] = []
+        self.point_lines: list[int] = []  # the line of each control point, for messages
         self.weights: list[float] = []
         self.decimals: dict[str, int | None] = {}
         # the X, Y, Z texts of the last `take_line`, whose decimals are worked out only when
@@ -119,10 +126,10 @@ class NurbsCurveReader:
                     + (" Q" if self.linuxcnc else "") + ")")
         order = block.first("P")
         if order is not None:
-            valid = (order.value == int(order.value)
-                     and (order.value >= 2 if self.linuxcnc else int(order.value) in FANUC_ORDERS))
+            orders = range(2, MAX_ORDER + 1) if self.linuxcnc else FANUC_ORDERS
+            valid = order.value == int(order.value) and orders[0] <= order.value <= orders[-1]
             if not valid:
-                rule = "2 or more" if self.linuxcnc else "2, 3 or 4"
+                rule = f"from 2 to {MAX_ORDER}" if self.linuxcnc else "2, 3 or 4"
                 raise InputError(f"{order.name}: the order P is a whole number {rule} "
                                  "(degree + 1)", state.where(order))
             self.order = int(order.value)
@@ -158,6 +165,7 @@ class NurbsCurveReader:
             x, y, z = previous[0] + x, previous[1] + y, previous[2] + z
         self.decimal_texts = (x_text, y_text, z_text)
         self.points.append((x, y, z))
+        self.point_lines.append(line)
         self.weights.append(weight)
         return True
 
@@ -191,6 +199,7 @@ class NurbsCurveReader:
                 self.points.append((x, y, z))
         else:
             self.points.extend(zip(xs, ys, zs))
+        self.point_lines.extend(range(line, line + n))
         self.weights.extend(weights)
         match = _POINT_LINE.fullmatch(program.text, last_start, end)
         assert match is not None, "scan_point_lines reads only _POINT_LINE lines"
@@ -282,6 +291,7 @@ class NurbsCurveReader:
             self.feed = state.apply_feed(feed)
             self.changes.append(FeedChange(knot.value, self.feed, feed))
         self.points.append((x, y, z))
+        self.point_lines.append(block.line)
         self.weights.append(1.0 if weight is None else weight.value)
 
     def _coordinate(self, axis: str, word: Word | None) -> float:
@@ -370,10 +380,11 @@ class NurbsCurveReader:
 
     def finish(self) -> FinishedCurve:
         self._flush_decimal_texts()
+        check_coordinates(self.points, self.point_lines, self.location)
         curve = build_curve(self.order - 1, self.knots, self.points, self.weights, self.name,
                             self.location)
-        feed_u, feed_mm_s = feed_steps(curve.u_min, curve.u_max, self.feed_before, self.changes,
-                                       self.state, self.location)
+        feed_u, feed_mm_s = feed_steps(curve, self.feed_before, self.changes, self.state,
+                                       self.location)
         end = {axis: AxisPos(self.points[-1][i], self.decimals.get(axis))
                for i, axis in enumerate(AXES)}
         return FinishedCurve(curve, self.location, feed_u, feed_mm_s, end, self.feed, G6_2)

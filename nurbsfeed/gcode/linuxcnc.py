@@ -15,7 +15,8 @@ this reader follows the interpreter, since that is what a machine does:
   specify both X and Y coordinates for Control Points", "Must specify positive weight P for every
   Control Point"; the docs' "default weight 1" is not what the interpreter does).
 - The order is 3 unless an L above 3 is given (smaller L is ignored by the interpreter; here it is
-  an error, since it cannot mean what was written); the last L in the block wins.
+  an error, since it cannot mean what was written); the last L in the block wins. LinuxCNC sets
+  no maximum; nurbsfeed refuses an L above nurbs_block.MAX_ORDER (README "Input envelope").
 - Knots are uniform, clamped, integer: with n + 1 control points of order k,
   `order zeros, 1 .. n-k+1, order copies of n-k+2` (knot_vector_creator).
 - G5.3 without G5.2 is an error; so are fewer control points (counting the start point) than the
@@ -33,9 +34,11 @@ from __future__ import annotations
 from nurbsfeed.errors import CurveError, InputError
 from nurbsfeed.gcode.modal import AXES, G5_2, G5_3, PLANES, AxisPos, ModalState
 from nurbsfeed.gcode.nurbs_block import (
+    MAX_ORDER,
     FinishedCurve,
     build_curve,
     check_block,
+    check_coordinates,
     check_no_assignments,
     count,
     curve_name,
@@ -77,6 +80,7 @@ class G52BlockReader:
                        for axis in AXES}
         self.points: list[tuple[float, float, float]] = [
             (self.origin["X"], self.origin["Y"], self.origin["Z"])]
+        self.point_lines = [start.line]  # the line of each control point, for messages
         self.weights = [1.0]
         self.decimals = {axis: state.pos[axis].decimals for axis in AXES}
         self.order = DEFAULT_ORDER
@@ -126,6 +130,10 @@ class G52BlockReader:
                 raise InputError(f"{order.name}: the order L of a G5.2 block is a whole number 3 "
                                  "or more (LinuxCNC ignores smaller L and uses 3)",
                                  state.where(order))
+            if order.value > MAX_ORDER:
+                raise InputError(f"{order.name}: the order L is at most {MAX_ORDER} (degree "
+                                 f"{MAX_ORDER - 1}, the highest nurbsfeed evaluates accurately)",
+                                 state.where(order))
             self.order = int(order.value)
         feed = block.first("F")
         if feed is not None:
@@ -152,6 +160,7 @@ class G52BlockReader:
             values.append(self.origin[axis] + word.value if self.state.incremental
                           else word.value)
         self.points.append((values[0], values[1], values[2]))
+        self.point_lines.append(next(iter(words.values())).line)
         self.weights.append(weight)
 
     def unfinished(self) -> InputError:
@@ -160,11 +169,11 @@ class G52BlockReader:
 
     def finish(self) -> FinishedCurve:
         knots = uniform_knots(len(self.points), self.order)
+        check_coordinates(self.points, self.point_lines, self.location)
         curve = build_curve(self.order - 1, knots, self.points, self.weights, self.name,
                             self.location)
         feed = self.state.feed
-        feed_u, feed_mm_s = feed_steps(curve.u_min, curve.u_max, feed, [], self.state,
-                                       self.location)
+        feed_u, feed_mm_s = feed_steps(curve, feed, [], self.state, self.location)
         end = {axis: AxisPos(self.points[-1][i], self.decimals[axis])
                for i, axis in enumerate(AXES)}
         return FinishedCurve(curve, self.location, feed_u, feed_mm_s, end, feed, None)

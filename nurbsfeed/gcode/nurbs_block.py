@@ -1,5 +1,5 @@
 """What the NURBS block readers (fanuc, linuxcnc) share: checks on a block's words, the curve they
-leave behind, and the programmed feed as a step function of u (SPEC §3a).
+leave behind, and the programmed feed as a step function of u (design §3a).
 """
 
 from __future__ import annotations
@@ -23,6 +23,9 @@ from nurbsfeed.gcode.modal import (
 )
 from nurbsfeed.gcode.tokenizer import Block, Word
 from nurbsfeed.geometry import NurbsCurve
+from nurbsfeed.geometry.nurbs import MAX_DEGREE, far_control_point, far_message
+
+MAX_ORDER = MAX_DEGREE + 1  # the highest P / L accepted (README "Input envelope")
 
 
 @dataclass(frozen=True)
@@ -93,21 +96,23 @@ def check_block(block: Block, state: ModalState, allowed_letters: str, allowed_g
             raise InputError(f"{word.name} does not belong in {what}", state.where(word))
 
 
-def feed_steps(u_min: float, u_max: float, initial: FeedWord | None,
-               changes: list[FeedChange], state: ModalState,
-               start: Location) -> tuple[np.ndarray, np.ndarray]:
-    """The programmed feed as a step function of u: ((k,) u starts, (k,) program units / s).
+def feed_steps(curve: NurbsCurve, initial: FeedWord | None, changes: list[FeedChange],
+               state: ModalState, start: Location) -> tuple[np.ndarray, np.ndarray]:
+    """The programmed feed as a step function of the curve's u: ((k,) u starts, (k,) program
+    units / s).
 
-    The feed in force when the block starts holds from u_min; each change holds from its u on
-    (clamped to u_min; a change at or after u_max only sets the modal F after the curve). A feed
-    of zero is an error (LinuxCNC: "Cannot make a NURBS with 0 feedrate"; Fanuc alarm PS0011).
+    The feed in force when the block starts holds from u_min; each change holds from its knot on
+    (the input's u, mapped as the curve maps its knots; clamped to u_min; a change at or after
+    u_max only sets the modal F after the curve). A feed of zero is an error (LinuxCNC: "Cannot
+    make a NURBS with 0 feedrate"; Fanuc alarm PS0011).
     """
+    u_min, u_max = curve.u_min, curve.u_max
     if initial is not None and initial.per_min == 0.0 and not (changes and changes[0].u <= u_min):
         raise InputError("the feed in force is F0: a NURBS curve needs a feed above zero", start)
     starts = [u_min]
     values = [math.inf if initial is None else initial.per_min / 60.0]
     for change in changes:
-        u = max(change.u, u_min)
+        u = max(curve.unit_u(change.u), u_min)
         if u >= u_max:
             continue
         if change.feed.per_min == 0.0:
@@ -128,6 +133,16 @@ def build_curve(degree: int, knots: list[float], points: list[tuple[float, float
         return NurbsCurve.build(degree, knots, points, weights, name)
     except CurveError as exc:
         raise exc.at(start) from None
+
+
+def check_coordinates(points: list[tuple[float, float, float]], lines: list[int],
+                      start: Location) -> None:
+    """NurbsCurve.build's coordinate check, its CurveError placed on the control point's line
+    (lines[i]; point 0, the curve's start, at the block start)."""
+    far = far_control_point(np.array(points))
+    if far is not None:
+        where = start if far == 0 else Location(start.file, lines[far], 1)
+        raise CurveError(far_message(far, points[far]), where)
 
 
 def count(n: int, noun: str) -> str:

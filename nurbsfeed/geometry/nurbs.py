@@ -7,10 +7,19 @@ The evaluators live in `geometry.kernel` (compiled with numba): each span's poly
 once per curve (`span_polynomials`, cached here) and evaluated by Horner's rule, vectorised
 (`eval_many`) or per parameter in the planning grid and the stepping loop; they are checked against
 a textbook evaluator that lives in the tests.
+
+`build` refuses curves outside the input envelope below (README "Input envelope"; the numbers
+come from `python -m tests.bench.envelope`, which compares this evaluation with an exact rational
+one and converts curves at and beyond each limit). Inside it, two rescalings that do not change
+the curve keep every number the kernels see well scaled: the knots are mapped affinely onto
+[0, 1] (a NURBS curve does not depend on an affine change of its parameter; `input_u` maps back
+for anything shown to the user), and the weights are multiplied by a power of two, exactly, so
+that the largest lies in [1, 2) (C depends only on the weights' ratios).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -18,6 +27,26 @@ import numpy as np
 
 from nurbsfeed.errors import CurveError
 from nurbsfeed.geometry.kernel import curvature_many, eval_many, span_polynomials
+
+
+# ---- the input envelope ------------------------------------------------------------------------
+# Degree: the Taylor-Horner evaluation stays within 2.3e-14 of the exact curve up to degree 9,
+# 1e-12 up to 19, and breaks down from degree 21 on; controllers accept 1-3 (Fanuc P2-P4,
+# Siemens BSPLINE SD <= 3) or 5 (Siemens POLY).
+MAX_DEGREE = 9
+# max(w) / min(w): evaluation stays accurate far beyond (1e12), but a control point that much
+# heavier than its neighbours makes a corner of radius ~1e-5 mm: at 3e3 conversions run to
+# millions of periods and `check` finds normal jerk broken, at 1e6 one move jumps 10 mm. At 1e3
+# every move measured stays within the feed and the chord tolerance. Siemens accepts
+# 0.0001 <= PW <= 3, Mitsubishi 0.0001 <= R <= 99.9999.
+MAX_WEIGHT_RATIO = 1e3
+# The narrowest non-empty knot span, as a share of the knot range: conversions measured correct
+# down to 1e-16; 9-digit Fanuc knots (0.001 .. 999999.999) are never closer than 1e-9.
+MIN_SPAN_REL = 1e-12
+# |coordinate| in program units: the Fanuc range (9 digits, 999999.999 mm); the stepping loop
+# resolves a position to 1e-10 there (its last bit), far below the finest output digit 1e-8
+# (decimals <= 8, so the writer's int64 ticks stay below 1e14).
+MAX_COORDINATE = 1e6
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -29,9 +58,11 @@ def _readonly(a: np.ndarray) -> np.ndarray:
 class NurbsCurve:
     """A clamped NURBS curve of degree >= 1 in 3-D (2-D input has z = 0).
 
-    knots: (n + degree + 2,) non-decreasing, clamped, any range; points: (n + 1, 3) Cartesian
-    (not pre-multiplied by the weights); weights: (n + 1,) positive. Build it with `build`, which
-    checks everything; the constructor itself is the unchecked path for already-valid arrays.
+    knots: (n + degree + 2,) non-decreasing, clamped; points: (n + 1, 3) Cartesian (not
+    pre-multiplied by the weights); weights: (n + 1,) positive. Build it with `build`, which
+    checks everything and maps the knots onto [0, 1] (the input's parameter is
+    u_origin + u_scale * u, `input_u`); the constructor itself is the unchecked path for
+    already-valid arrays, taken as they are.
     """
 
     degree: int
@@ -39,14 +70,23 @@ class NurbsCurve:
     points: np.ndarray
     weights: np.ndarray
     name: str = ""
+    u_origin: float = 0.0  # the input's first knot
+    u_scale: float = 1.0  # the input's knot range
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
     def build(cls, degree: object, knots: object, points: object, weights: object = None,
               name: str = "") -> "NurbsCurve":
-        """Check a user's curve field by field; raise CurveError naming the field and value."""
+        """Check a user's curve field by field; raise CurveError naming the field and value.
+
+        The knots are stored mapped onto [0, 1] and the weights scaled by a power of two (see the
+        module docstring); the curve is the one given.
+        """
         if isinstance(degree, bool) or not isinstance(degree, (int, np.integer)) or degree < 1:
             raise CurveError(f"degree must be a whole number >= 1, not {degree!r}")
+        if degree > MAX_DEGREE:
+            raise CurveError(f"degree {degree} is above {MAX_DEGREE}, the highest nurbsfeed "
+                             "evaluates accurately")
         degree = int(degree)
         try:
             pts = np.array(points, dtype=float)
@@ -58,6 +98,9 @@ class NurbsCurve:
         if not np.isfinite(pts).all():
             bad = int(np.argwhere(~np.isfinite(pts))[0][0])
             raise CurveError(f"control point {bad} is not finite: {pts[bad].tolist()}")
+        far = far_control_point(pts)
+        if far is not None:
+            raise CurveError(far_message(far, pts[far]))
         if pts.shape[1] == 2:
             pts = np.column_stack([pts, np.zeros(len(pts))])
         n_ctrl = len(pts)
@@ -78,12 +121,20 @@ class NurbsCurve:
                 bad_w = np.flatnonzero(~(np.isfinite(w) & (w > 0)))
                 raise CurveError(f"weight {bad_w[0]} must be positive and finite, "
                                  f"not {float(w[bad_w[0]])!r}")
+            heavy, light = int(np.argmax(w)), int(np.argmin(w))
+            if w[heavy] > MAX_WEIGHT_RATIO * w[light]:
+                raise CurveError(f"weight {heavy} ({w[heavy]:g}) is more than "
+                                 f"{MAX_WEIGHT_RATIO:g} times weight {light} ({w[light]:g}); "
+                                 "nurbsfeed plans curves up to that ratio")
+            w = np.ldexp(w, 1 - np.frexp(w[heavy])[1])  # exact: the largest now in [1, 2)
         try:
             k = np.array(knots, dtype=float)
         except (TypeError, ValueError):
             raise CurveError("knots must be numbers") from None
         check_knots(k, degree, n_ctrl)
-        return cls(degree, _readonly(k), _readonly(pts), _readonly(w), name)
+        u_origin, u_scale = float(k[0]), float(k[-1] - k[0])
+        unit = (k - u_origin) / u_scale  # monotone; 0 and 1 exactly at the ends
+        return cls(degree, _readonly(unit), _readonly(pts), _readonly(w), name, u_origin, u_scale)
 
     # ---- basic facts -------------------------------------------------------------------------
     @property
@@ -93,6 +144,15 @@ class NurbsCurve:
     @property
     def u_max(self) -> float:
         return float(self.knots[-self.degree - 1])
+
+    def input_u(self, u: np.ndarray | float) -> np.ndarray | float:
+        """The input's own parameter at u (the knots as the user wrote them): (N,) -> (N,)."""
+        return self.u_origin + self.u_scale * u
+
+    def unit_u(self, u_input: float) -> float:
+        """The inverse of `input_u`, computed as `build` maps the knots: an input knot gives
+        exactly the stored knot."""
+        return (u_input - self.u_origin) / self.u_scale
 
     @property
     def n_ctrl(self) -> int:
@@ -172,6 +232,15 @@ def check_knots(k: np.ndarray, degree: int, n_ctrl: int) -> None:
                          f"knots must be equal (order {order})")
     if k[-1] <= k[0]:
         raise CurveError(f"knot range is empty: all knots are {k[0]:g}")
+    knot_range = float(k[-1]) - float(k[0])  # (Python floats: inf, not a numpy warning)
+    if not math.isfinite(knot_range):
+        raise CurveError(f"knot range {k[0]:g} .. {k[-1]:g} is wider than a double holds")
+    widths = np.diff(k)
+    narrowest = int(np.argmin(np.where(widths > 0, widths, np.inf)))
+    if widths[narrowest] < MIN_SPAN_REL * knot_range:
+        raise CurveError(f"knot span {float(k[narrowest])!r} .. {float(k[narrowest + 1])!r} is "
+                         f"{widths[narrowest] / knot_range:.1e} of the knot range; at least "
+                         f"{MIN_SPAN_REL:g}")
     interior = k[order:-order]  # non-decreasing: equal knots are neighbours
     if interior.size:
         if interior.size > degree and (interior[degree:] == interior[:-degree]).any():
@@ -181,3 +250,15 @@ def check_knots(k: np.ndarray, degree: int, n_ctrl: int) -> None:
                              f"most {degree} (the degree) keeps the curve connected")
         if interior[0] == k[0] or interior[-1] == k[-1]:
             raise CurveError(f"an end knot is repeated more than the order {order}")
+
+
+def far_control_point(points: np.ndarray) -> int | None:
+    """The first control point with a coordinate beyond MAX_COORDINATE, or None: (n, d) -> index.
+    (The readers call it to place the error on that point's line.)"""
+    far = np.flatnonzero((np.abs(points) > MAX_COORDINATE).any(axis=1))
+    return int(far[0]) if far.size else None
+
+
+def far_message(index: int, point: np.ndarray) -> str:
+    return (f"control point {index} {np.asarray(point, dtype=float).tolist()} has a coordinate "
+            f"beyond +-{MAX_COORDINATE:.0f}, the range nurbsfeed converts")

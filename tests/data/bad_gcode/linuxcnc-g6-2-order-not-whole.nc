@@ -1,4 +1,4 @@
-; expect: 7:6: P2.5: the order P is a whole number 2 or more (degree + 1)
+; expect: 7:6: P2.5: the order P is a whole number from 2 to 10 (degree + 1)
 %
 O2000 (BAD INPUT CASE)
 G17 G21 G40 G49 G80 G90 G94
