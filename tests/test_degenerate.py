@@ -68,17 +68,19 @@ EXPECTED = {
     "reversal-between-samples": ([(0.0494847550, "cusp")], None),
     # a double knot with the control point there repeated on both sides: C' = 0 from both
     "double-knot-corner-repeated-point": ([(0.5, "corner")], 20.0),
-    # weights 1e-5 beside the ends: a hook of ~4 nm radius at each end and a near corner in
-    # the middle (planned once at 5e6 s: the whole segment capped at the hook's limit)
-    "weights-near-zero": ([], 35.0),
-    # a weight of 1e4 in the middle: three sharp peaks within 6 um (planned once at 41 s)
-    "weight-1e4": ([], None),
+    # weights 1e-3 beside the ends (the envelope's ratio of 1000): a hook at each end and a near
+    # corner in the middle (at 1e-5, outside the envelope now, the whole segment was once capped
+    # at the hook's limit: 5e6 s)
+    "weights-near-zero": ([], None),
+    # a weight of 1e3 in the middle: three sharp peaks close together
+    "weight-1e3": ([], None),
     # a 2 um reversal at the start, then out along x and back 2 um aside: a turn of ~5 nm
-    # radius (kappa 2e8; C' small but not 0), once held at 1e-5 mm/s for 2.6 s
+    # radius (kappa 2e8; C' small but not 0), once held at 1e-5 mm/s for 2.6 s (1.38 s without
+    # shoulders today)
     "near-cusp-beside-repeated-points": ([(0.1, "cusp")], None),
 }
 # file -> the most its plan may take under the default profile at 100 mm/s (s)
-CYCLE_AT_MOST_S = {"weights-near-zero": 0.6, "weight-1e4": 0.7,
+CYCLE_AT_MOST_S = {"weights-near-zero": 0.6, "weight-1e3": 0.7,
                    "near-cusp-beside-repeated-points": 0.8}
 
 
