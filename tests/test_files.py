@@ -53,11 +53,15 @@ def crash_on(name: str, how):
     return convert_file
 
 
+FORK_ONLY = pytest.mark.skipif(multiprocessing.get_start_method() != "fork",
+                               reason="the workers must inherit the patched convert_file")
+
+
 def boom() -> None:
     raise ZeroDivisionError("boom\nsecond line")
 
 
-@pytest.mark.parametrize("jobs", ["1", "2"])
+@pytest.mark.parametrize("jobs", ["1", pytest.param("2", marks=FORK_ONLY)])
 def test_a_crash_in_one_file_fails_its_row_and_the_others_are_converted(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, jobs: str) -> None:
     crash = tmp_path / "crash.json"
@@ -81,8 +85,7 @@ def test_a_crash_converting_a_single_input_is_one_line_with_the_file(
     assert listing(tmp_path) == []
 
 
-@pytest.mark.skipif(multiprocessing.get_start_method() != "fork",
-                    reason="the workers must inherit the patched convert_file")
+@FORK_ONLY
 def test_a_killed_worker_fails_only_the_file_that_killed_it(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """The pool breaks and fails every file in flight; each is converted again alone, so only
