@@ -2,7 +2,8 @@
 
 Every command is thin: parse options, call the pipeline or an analysis, print its report. Errors
 from the core (NurbsfeedError) become `FILE:LINE:COL: message` on stderr with the exit code from
-errors.py and no traceback.
+errors.py and no traceback. SIGINT, SIGTERM and SIGHUP become `Interrupted`, which unwinds like an
+error (temporary files removed) and ends the process with 128 + the signal number.
 """
 
 from __future__ import annotations
@@ -10,6 +11,9 @@ from __future__ import annotations
 import functools
 import gc
 import glob
+import os
+import signal
+import stat
 import sys
 import time
 from pathlib import Path
@@ -18,7 +22,8 @@ from typing import Any, Callable
 import click
 
 from nurbsfeed import __version__
-from nurbsfeed.errors import EXIT_BAD_INPUT, NurbsfeedError
+from nurbsfeed.errors import (EXIT_BAD_INPUT, EXIT_BROKEN_PIPE, EXIT_SIGNAL_BASE, InputError,
+                              Interrupted, Location, NurbsfeedError)
 from nurbsfeed.interpolate import METHODS
 from nurbsfeed.machine import FLOAT_KEYS, INT_KEYS, Machine, load_machine
 
@@ -26,10 +31,12 @@ TAYLOR1_WARNING = ("nurbsfeed: warning: taylor1 is the paper's first-order basel
                    "drift off the planned feed by up to a few percent, which can break the "
                    "limits (use rk2c to machine)")
 GCODE_SUFFIXES = (".nc", ".ngc", ".gcode", ".tap", ".cnc", ".txt", ".json", ".mpf", ".eia")
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 def reports_errors(func: Callable[..., Any]) -> Callable[..., Any]:
-    """Map NurbsfeedError to its message and exit code (never a traceback)."""
+    """Map NurbsfeedError to its message and exit code (never a traceback); a reader of stdout
+    that went away (`| head -1`) ends the run quietly with 141, as if by SIGPIPE."""
 
     @functools.wraps(func)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
@@ -38,8 +45,59 @@ def reports_errors(func: Callable[..., Any]) -> Callable[..., Any]:
         except NurbsfeedError as exc:
             click.echo(str(exc), err=True)
             sys.exit(exc.exit_code)
+        except BrokenPipeError:
+            _detach_stdout()
+            sys.exit(EXIT_BROKEN_PIPE)
 
     return wrapper
+
+
+def _detach_stdout() -> None:
+    """Point stdout at /dev/null, so that flushing it at exit does not fail a second time."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, sys.stdout.fileno())
+    except (AttributeError, OSError, ValueError):  # no stdout, or not a real file (tests)
+        pass
+    finally:
+        os.close(devnull)
+
+
+_stopped_by = 0  # the stop signal that arrived, if one has
+
+
+def _stop(signum: int, frame: Any) -> None:
+    """The handler of STOP_SIGNALS: unwind through every cleanup. A repeated signal (a second
+    Ctrl-C) is ignored so that it cannot cut a cleanup short. An exception raised while Python
+    code runs inside a callback from compiled code (numba's cache) is lost there: the conversion
+    checks `_stopped_by` after every curve, and the hook keeps the lost one off stderr."""
+    global _stopped_by
+    _stopped_by = signum
+    for other in STOP_SIGNALS:
+        if signal.getsignal(other) != signal.SIG_IGN:
+            signal.signal(other, _ignore)  # not SIG_IGN: one already on its way would raise
+    raise Interrupted(signum)
+
+
+def _ignore(signum: int, frame: Any) -> None:
+    pass
+
+
+def _check_stopped() -> None:
+    if _stopped_by:
+        raise Interrupted(_stopped_by)
+
+
+def _unraisable(hook_args: Any) -> None:
+    if not isinstance(hook_args.exc_value, Interrupted):
+        sys.__unraisablehook__(hook_args)
+
+
+def _handle_stop_signals(handler: Callable[[int, Any], None]) -> None:
+    sys.unraisablehook = _unraisable
+    for signum in STOP_SIGNALS:
+        if signal.getsignal(signum) != signal.SIG_IGN:  # nohup, a background job: stay deaf
+            signal.signal(signum, handler)
 
 
 def machine_options(func: Callable[..., Any]) -> Callable[..., Any]:
@@ -59,7 +117,7 @@ def machine_from(kwargs: dict[str, Any]) -> Machine:
 
 
 method_option = click.option("--method", type=click.Choice(list(METHODS)), default="rk2c",
-                             show_default=True, help="Interpolator (SPEC §3).")
+                             show_default=True, help="Interpolator (docs/design.md §3).")
 dialect_option = click.option("--dialect", type=click.Choice(["auto", "fanuc", "linuxcnc"]),
                               default="auto", show_default=True,
                               help="G-code dialect of the input.")
@@ -96,26 +154,174 @@ def output_name(source: Path) -> str:
     return source.stem + ".nc" if source.suffix.lower() == ".json" else source.name
 
 
+def _file_id(path: Path) -> tuple[int, int] | None:
+    """(device, inode) of an existing regular file, links followed; None for anything else."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return (st.st_dev, st.st_ino) if stat.S_ISREG(st.st_mode) else None
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one of them does not exist (yet)
+        return os.path.realpath(a) == os.path.realpath(b)
+
+
+def refuse_overwrites(sources: list[Path], targets: list[Path | None], named: Path | None,
+                      trace: Path | None) -> None:
+    """Before anything is converted: no output may be an input (by another path, a hard link or
+    a symbolic link), no two inputs may write the same output (names equal up to case, for
+    case-insensitive file systems), and -o and --trace must differ. `named`: the -o FILE given
+    for a single input (a target of its own, not a name in a directory)."""
+    inputs: dict[tuple[int, int] | None, Path] = {}
+    for source in sources:
+        inputs.setdefault(_file_id(source), source)
+    inputs.pop(None, None)
+    writers: dict[str, Path] = {}
+    for source, target in zip(sources, targets):
+        if target is None:
+            continue
+        key = os.path.realpath(target).casefold()
+        if key in writers:
+            raise InputError(f"both {writers[key]} and {source} would be written here (rename "
+                             "one, or convert them in separate runs)", Location(str(target)))
+        writers[key] = source
+        clobbered = inputs.get(_file_id(target))
+        if clobbered is not None:
+            what = "-o" if target == named else f"the output of {source}"
+            raise InputError(f"{what} would overwrite the input {clobbered}",
+                             Location(str(target)))
+    if trace is not None:
+        clobbered = inputs.get(_file_id(trace))
+        if clobbered is not None:
+            raise InputError(f"--trace would overwrite the input {clobbered}",
+                             Location(str(trace)))
+        if targets[0] is not None and _same_file(trace, targets[0]):
+            raise InputError("-o and --trace name the same file", Location(str(trace)))
+
+
+def internal_error(exc: Exception) -> str:
+    """A bug's exception as one line of a summary row."""
+    return " ".join(f"internal error: {type(exc).__name__}: {exc}".split())
+
+
 def _convert_one(source: Path, target: Path | None, machine: Machine, method: str,
                  dialect: str, trace: Path | None, progress: bool) -> dict[str, Any]:
-    """Convert one file (also the unit of work of --jobs); errors come back as data."""
+    """Convert one file (also the unit of work of --jobs); errors come back as data, a bug's
+    exception too (one file's crash must not stop a batch)."""
     from nurbsfeed.pipeline import convert_file
 
     status = _Progress(source) if progress else None
+
+    def on_curve(result: Any) -> None:
+        _check_stopped()
+        if status:
+            status.update(result)
+
     start = time.perf_counter()
     try:
         report = convert_file(source, target, machine, method, dialect, trace,
                               stdout=sys.stdout.buffer if target is None else None,
-                              on_curve=status.update if status else None)
+                              on_curve=on_curve)
     except NurbsfeedError as exc:
+        return {"source": str(source), "error": str(exc)}
+    except BrokenPipeError:
+        raise  # from stdout only (convert_file): the run ends quietly
+    except Exception as exc:  # a bug: reported in the file's row, and the batch goes on
+        return {"source": str(source), "error": internal_error(exc), "internal": True}
+    finally:
         if status:
             status.close()
-        return {"source": str(source), "error": str(exc)}
-    if status:
-        status.close()
     return {"source": str(source), "target": str(target) if target else "-",
             "curves": len(report.curves), "points": report.n_points,
             "cycle_s": report.cycle_time_s, "wall_s": time.perf_counter() - start}
+
+
+# ---- --jobs: worker processes ----
+
+_worker_busy = False  # in a --jobs worker: a file is being converted
+
+
+def _worker_stop(signum: int, frame: Any) -> None:
+    """A worker's signal handler: unwind the file being converted (its temporary files go);
+    idle, just end."""
+    if not _worker_busy:
+        os._exit(EXIT_SIGNAL_BASE + signum)
+    _stop(signum, frame)
+
+
+def _init_worker() -> None:
+    _handle_stop_signals(_worker_stop)
+
+
+def _convert_in_worker(*args: Any) -> dict[str, Any]:
+    global _worker_busy
+    _worker_busy = True
+    try:
+        return _convert_one(*args)
+    except Interrupted as exc:
+        os._exit(exc.exit_code)  # cleaned up; the parent, signalled too, reports the stop
+    finally:
+        _worker_busy = False
+
+
+def convert_in_pool(sources: list[Path], targets: list[Path | None], jobs: int,
+                    *args: Any) -> list[dict[str, Any]]:
+    """Convert in `jobs` worker processes; `args`: machine, method, dialect.
+
+    A worker that dies (killed, out of memory, a crash in compiled code) breaks the pool and
+    fails the files in flight, at most `jobs` of them, since files are handed out one at a time;
+    each of those is converted again in a process of its own, so that only a file that kills
+    its worker fails, and the rest go on in a new pool.
+    """
+    results: dict[int, dict[str, Any]] = {}
+    todo = list(range(len(sources)))
+    while todo:
+        lost, todo = _pool_round(todo, jobs, sources, targets, args, results)
+        for index in lost:
+            if _pool_round([index], 1, sources, targets, args, results)[0]:
+                results[index] = {"source": str(sources[index]), "error": (
+                    "internal error: BrokenProcessPool: the worker process converting this "
+                    "file died (killed by a signal, or out of memory)")}
+    return [results[index] for index in range(len(sources))]
+
+
+def _pool_round(todo: list[int], jobs: int, sources: list[Path], targets: list[Path | None],
+                args: tuple[Any, ...], results: dict[int, dict[str, Any]]
+                ) -> tuple[list[int], list[int]]:
+    """Convert files `todo` into `results` until done or the pool breaks: (files in flight when
+    it broke, files not handed out)."""
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures.process import BrokenProcessPool
+    import multiprocessing
+
+    waiting = todo[::-1]
+    lost: list[int] = []
+    with ProcessPoolExecutor(max_workers=min(jobs, len(todo)), initializer=_init_worker) as pool:
+        try:
+            running: dict[Any, int] = {}
+            while (waiting or running) and not lost:
+                while waiting and len(running) < jobs:
+                    index = waiting.pop()
+                    running[pool.submit(_convert_in_worker, sources[index], targets[index],
+                                        *args, None, False)] = index
+                done, _ = wait(running, return_when=FIRST_COMPLETED)
+                for future in done:
+                    index = running.pop(future)
+                    try:
+                        results[index] = future.result()
+                    except BrokenProcessPool:
+                        lost.append(index)
+            lost += running.values()
+        except Interrupted as exc:
+            pool.shutdown(wait=False, cancel_futures=True)
+            for child in multiprocessing.active_children():
+                os.kill(child.pid, exc.signum)  # each removes its temporary files and ends
+            raise
+    return lost, waiting[::-1]
 
 
 class _Progress:
@@ -183,27 +389,30 @@ def convert(inputs: tuple[str, ...], output: Path | None, method: str, dialect: 
         raise click.UsageError(f"-o {output}: several inputs need a directory")
     if trace is not None and len(sources) > 1:
         raise click.UsageError("--trace takes a single input")
-    if many and output is not None:
-        output.mkdir(parents=True, exist_ok=True)
     targets = [output / output_name(s) if many and output else output for s in sources]
-    progress = sys.stderr.isatty() and not quiet
+    refuse_overwrites(sources, targets, None if many else output, trace)
+    if output is None and sys.stdout is None:
+        raise InputError("cannot write output (standard output is closed)", Location("-"))
+    if many and output is not None:
+        try:
+            output.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise InputError(f"cannot create the output directory ({exc.strerror})",
+                             Location(str(output))) from None
+    progress = sys.stderr is not None and sys.stderr.isatty() and not quiet
     if method == "taylor1":
         click.echo(TAYLOR1_WARNING, err=True)
     if jobs > 1 and len(sources) > 1:
-        from concurrent.futures import ProcessPoolExecutor  # 20 ms: only for --jobs
-
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            results = list(pool.map(_convert_one, sources, targets,
-                                    [machine] * len(sources), [method] * len(sources),
-                                    [dialect] * len(sources), [None] * len(sources),
-                                    [False] * len(sources)))
+        results = convert_in_pool(sources, targets, jobs, machine, method, dialect)
     else:
         results = [_convert_one(s, t, machine, method, dialect, trace, progress)
                    for s, t in zip(sources, targets)]
     failed = [r for r in results if "error" in r]
     if not many:
         if failed:
-            click.echo(failed[0]["error"], err=True)
+            error = failed[0]
+            click.echo(f"{error['source']}: {error['error']}" if error.get("internal")
+                       else error["error"], err=True)
             sys.exit(EXIT_BAD_INPUT)
         if output is not None and not quiet:
             r = results[0]
@@ -359,10 +568,19 @@ def plot(input: Path, output: Path, curve_index: int, method: str, dialect: str,
         sys.exit(EXIT_BAD_INPUT)
     from nurbsfeed.analysis import curve_run, run_series
 
+    from nurbsfeed.pipeline import output_target
+
+    if _file_id(output) is not None and _same_file(input, output):
+        raise InputError(f"-o would overwrite the input {input}", Location(str(output)))
+    output_target(output)  # refused now, not after the run
     name = kwargs["machine"]
     block, plan, result = curve_run(input, machine_from(kwargs), method, dialect, curve_index)
-    plotting.plot_run(output, plan, result, run_series(block, plan, result), block.units,
-                      name)
+    try:
+        plotting.plot_run(output, plan, result, run_series(block, plan, result), block.units,
+                          name)
+    except OSError as exc:
+        raise InputError(f"cannot write output ({exc.strerror or exc})",
+                         Location(str(output))) from None
 
 
 def run() -> None:
@@ -371,9 +589,18 @@ def run() -> None:
     Everything imported by now, numba's ~100k objects among it, lives as long as the process;
     frozen, the garbage collector never walks it again, which saves ~0.2 s of interpreter
     teardown per run (measured by tests/bench/run.py's cold start).
+
+    Stop signals are handled here, in the process's own entry point only (not in a library
+    call of `main`): SIGINT, SIGTERM or SIGHUP unwinds the run, removing temporary files, and
+    exits with 128 + the signal number (130, 143, 129).
     """
     gc.freeze()
-    main()
+    _handle_stop_signals(_stop)
+    try:
+        main()
+    except Interrupted as exc:
+        click.echo(f"nurbsfeed: stopped by {signal.Signals(exc.signum).name}", err=True)
+        sys.exit(exc.exit_code)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -9,7 +9,9 @@ from dataclasses import dataclass
 
 EXIT_OK = 0
 EXIT_VIOLATION = 1  # `check` found a broken limit
-EXIT_BAD_INPUT = 2  # bad usage, bad input file, bad machine profile
+EXIT_BAD_INPUT = 2  # bad usage, bad input file, bad machine profile, an unwritable output
+EXIT_SIGNAL_BASE = 128  # stopped by signal N: 128 + N (SIGHUP 129, SIGINT 130, SIGTERM 143)
+EXIT_BROKEN_PIPE = EXIT_SIGNAL_BASE + 13  # 141, as if killed by SIGPIPE: stdout's reader left
 
 
 @dataclass(frozen=True)
@@ -58,3 +60,19 @@ class CurveError(InputError):
 
 class ProfileError(InputError):
     """A machine profile with a missing, unknown or invalid key."""
+
+
+class Interrupted(BaseException):
+    """SIGINT, SIGTERM or SIGHUP arrived (raised by the CLI's signal handler).
+
+    It unwinds the conversion like an error, so every temporary file is removed on the way out.
+    A BaseException, so that no `except Exception` (a batch reporting a file's crash) stops it.
+    """
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+    @property
+    def exit_code(self) -> int:
+        return EXIT_SIGNAL_BASE + self.signum

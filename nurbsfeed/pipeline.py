@@ -4,7 +4,8 @@ The program is streamed item by item: pass-through lines are copied as bytes, ea
 is planned, then stepped and written as G1 moves chunk by chunk before the next item is read, so
 memory holds one chunk of one curve at a time whatever the output size or the curve's duration.
 Output files are written to a temporary file beside the target and renamed into place only when
-the whole conversion succeeded.
+the whole conversion succeeded (a device or FIFO is written into from a temporary file at the end,
+never replaced).
 """
 
 from __future__ import annotations
@@ -12,6 +13,9 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import os
+import re
+import shutil
+import stat
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -193,25 +197,74 @@ def _umask_mode() -> int:
 
 
 _CREATE_MODE = _umask_mode()
+# Names of an open descriptor (Linux, BSD): whatever file is behind them belongs to the shell's
+# redirection, so it is written into, never replaced (`-o /dev/stdout >> log` must append).
+_DESCRIPTOR_PATH = re.compile(r"/dev/(stdout|stderr|fd/\d+)|/proc/(self|thread-self|\d+)/fd/\d+")
+_KIND_NAMES = {stat.S_IFDIR: "a directory", stat.S_IFBLK: "a block device",
+               stat.S_IFSOCK: "a socket"}
+
+
+def output_target(path: Path) -> tuple[Path, bool]:
+    """Where output named `path` goes, and whether it is written through rather than replaced.
+
+    A new name or a regular file is replaced atomically (temporary file + rename); behind a
+    symbolic link, the file it points to is (the link stays). A character device (/dev/null, a
+    terminal), a FIFO or a descriptor's name (/dev/stdout) is opened and written, never replaced.
+    Anything else (a directory, a block device, a socket, a link to nothing) is refused: nurbsfeed
+    never replaces a file that is not a regular file.
+    """
+    where = Location(str(path))
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        if os.path.islink(path):
+            raise InputError(f"cannot write output: a symbolic link to {os.readlink(path)}, "
+                             "which does not exist", where) from None
+        if not path.parent.is_dir():
+            raise InputError(f"cannot write output: directory {path.parent} does not exist",
+                             where) from None
+        return path, False
+    except OSError as exc:
+        raise InputError(f"cannot write output ({exc.strerror})", where) from None
+    if (stat.S_ISCHR(mode) or stat.S_ISFIFO(mode)
+            or _DESCRIPTOR_PATH.fullmatch(os.path.abspath(path))):
+        return path, True
+    if stat.S_ISREG(mode):
+        return Path(os.path.realpath(path)), False
+    kind = _KIND_NAMES.get(stat.S_IFMT(mode), "not a regular file")
+    raise InputError(f"cannot write output: it is {kind} (nurbsfeed writes regular files, "
+                     "character devices and FIFOs)", where)
 
 
 @contextlib.contextmanager
 def atomic_output(path: Path | None) -> Iterator[BinaryIO]:
-    """A binary stream that becomes `path` only if the block completes; None: a temp file the
-    caller copies out (stdout), so a failure never leaves partial output anywhere."""
-    folder = path.parent if path is not None else None
+    """A binary stream whose content reaches `path` only if the block completes.
+
+    Always a temporary file first, removed on every way out (an error, an exception from a
+    signal): renamed onto `path` (see `output_target`), or copied into it when `path` is written
+    through; None: the caller copies it out (stdout). A failure never leaves partial output.
+    """
+    final, through = output_target(path) if path is not None else (None, False)
+    folder = final.parent if final is not None and not through else None
     handle = tempfile.NamedTemporaryFile(
-        "w+b", dir=folder, prefix=f".{path.name}." if path else "nurbsfeed.", suffix=".part",
+        "w+b", dir=folder, prefix=f".{final.name}." if folder else "nurbsfeed.", suffix=".part",
         delete=False)
     try:
         with handle:
             yield handle
             handle.flush()
-            if path is not None:
+            if through:
+                handle.seek(0)
+                with open(os.open(final, os.O_WRONLY | os.O_APPEND), "ab") as sink:
+                    shutil.copyfileobj(handle, sink, 1 << 20)
+            elif final is not None:
                 os.fsync(handle.fileno())
-        if path is not None:
+        if folder is not None:
+            if os.path.lexists(final) and not stat.S_ISREG(os.lstat(final).st_mode):
+                raise InputError("cannot write output: it is no longer a regular file",
+                                 Location(str(path)))  # swapped since output_target looked
             os.chmod(handle.name, _CREATE_MODE)  # a temp file is 0600; a new file is not
-            os.replace(handle.name, path)
+            os.replace(handle.name, final)
         else:
             os.unlink(handle.name)
     except BaseException:
@@ -228,21 +281,26 @@ def convert_file(source: Path, target: Path | None, machine: Machine, method: st
     text = read_text(source)
     report = FileReport(str(source))
     items = read_program(source, text, dialect, machine.decimals)
-    writing = target
+    writing: str | None = str(target or "-")  # which output an OSError is about; None: stdout
     try:
-        with atomic_output(target) as out, contextlib.ExitStack() as stack:
-            writing = trace_path
-            trace = stack.enter_context(atomic_output(trace_path)) if trace_path else None
-            writing = target
-            if trace is not None:
-                trace.write(TRACE_HEADER.encode("ascii"))
-            convert_stream(items, out, machine, method, report, trace, on_curve)
+        with atomic_output(target) as out:
+            writing = str(trace_path)
+            with atomic_output(trace_path) if trace_path else contextlib.nullcontext() as trace:
+                writing = str(target or "-")
+                if trace is not None:
+                    trace.write(TRACE_HEADER.encode("ascii"))
+                convert_stream(items, out, machine, method, report, trace, on_curve)
+                writing = str(trace_path)
+            writing = str(target or "-")
             if target is None and stdout is not None:
                 out.flush()
                 out.seek(0)
-                while chunk := out.read(1 << 20):
-                    stdout.write(chunk)
+                writing = None
+                shutil.copyfileobj(out, stdout, 1 << 20)
+                stdout.flush()
     except OSError as exc:
+        if writing is None and isinstance(exc, BrokenPipeError):
+            raise  # stdout's reader left (`| head`): the caller ends quietly, as Unix tools do
         raise InputError(f"cannot write output ({exc.strerror or exc})",
-                         Location(str(writing or "-"))) from None
+                         Location(writing or "-")) from None
     return report

@@ -237,7 +237,8 @@ def test_missing_input_and_unwritable_output(tmp_path: Path) -> None:
                                  "directory)\n")
     target = tmp_path / "missing-dir" / "x.nc"
     code, _, stderr = run("convert", str(SAMPLES / "quarter-circle.json"), "-o", str(target))
-    assert (code, stderr) == (2, f"{target}: cannot write output (No such file or directory)\n")
+    assert (code, stderr) == (2, f"{target}: cannot write output: directory {target.parent} "
+                                 "does not exist\n")
 
 
 def test_usage_errors_exit_2() -> None:
