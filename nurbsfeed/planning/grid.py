@@ -71,6 +71,7 @@ CORNER_PROBE_REL = 1e-9  # of the parameter range: how far beside the knot the t
 # zero of a polynomial C' refines to ~1e-12 of the mean or below; one that does not is a near
 # cusp whose curvature the limits already handle.
 ZERO_SPEED_REL = 1e-7
+ZERO_CANDIDATE_REL = 0.05  # a local minimum of |C'| on the samples below this of the mean
 ZERO_ITERATIONS = 60  # Gauss-Newton steps towards a minimum of |C'|^2 (linear at a double zero)
 TANGENT_PROBE_REL = 1e-4  # of the span's width: where the chords beside a zero end ...
 TANGENT_CHORD_REL = 1e-9  # ... grown tenfold until they are this long (of the polygon's length)
@@ -108,7 +109,8 @@ def polygon_length(points):
 def _samples(knots, coef, degree, breaks, spacing_mm):
     """Step 1: nodes evenly spaced in u per span, at most spacing_mm apart (the span's length
     estimated by CHORD_PROBES chords, plus 5 %), at least MIN_NODES_PER_SPAN; the last break
-    closes the list. Returns u, kappa, |C'| at the nodes: three (M,) arrays. At an interior
+    closes the list. Returns u, kappa, |C'| at the nodes (M,), C and the unit tangent there
+    (M, 3; the tangent from the span after a knot, 0 where C' = 0). At an interior
     knot kappa is the higher of its limits from the two sides (it jumps where the curve is
     only C1), so that no node understates the curvature around it."""
     n_ctrl = coef.shape[0]
@@ -137,18 +139,21 @@ def _samples(knots, coef, degree, breaks, spacing_mm):
     u_nodes[q] = breaks[n_spans]
     kappa = np.empty(u_nodes.size)
     speed = np.empty(u_nodes.size)
+    pts = np.empty((u_nodes.size, 3))
+    tan = np.zeros((u_nodes.size, 3))
     span = degree
     for q in range(u_nodes.size):
         before = span
         span = find_span(knots, degree, n_ctrl, u_nodes[q], span)
         c = point_d2(knots, coef, degree, span, u_nodes[q])
         kappa[q], speed[q] = curvature(c[3], c[4], c[5], c[6], c[7], c[8])
+        _unit_tangent(c, pts, tan, q)
         if span != before and q > 0:  # a knot: kappa may jump there, take the higher side
             c = point_d2(knots, coef, degree, before, u_nodes[q])
             left, _ = curvature(c[3], c[4], c[5], c[6], c[7], c[8])
             if left > kappa[q] or kappa[q] != kappa[q]:
                 kappa[q] = left
-    return u_nodes, kappa, speed
+    return u_nodes, kappa, speed, pts, tan
 
 
 @jit
@@ -480,11 +485,13 @@ def _zero_is_smooth(knots, coef, degree, u0, width_before, width_after, floor_mm
 
 
 @jit
-def _stops(knots, coef, degree, breaks, u, speed, zero_speed, floor_mm, kappa_floor):
+def _stops(knots, coef, degree, breaks, u, speed, tangent, zero_speed, floor_mm, kappa_floor):
     """Step 3: the interior points where C' vanishes and the motion must come to rest.
 
-    Candidates are the samples where |C'| has a local minimum (refined by `_refine_zero`
-    inside the bracket of their neighbours), the intervals across which the tangent turns by
+    Candidates are the samples where |C'| has a local minimum below ZERO_CANDIDATE_REL of its
+    mean (refined by `_refine_zero` inside the bracket of their neighbours; a zero whose
+    neighbouring samples are faster than that is a cusp or reversal, found by the next rule, or
+    removable), the intervals across which the tangent turns by
     more than 90 degrees, and every interior knot, where |C'| is taken from both sides (a
     repeated control point makes it vanish on one side only). A candidate whose
     |C'| is at most zero_speed is a zero of C'; each is classified by `_zero_is_smooth`: a
@@ -494,21 +501,12 @@ def _stops(knots, coef, degree, breaks, u, speed, zero_speed, floor_mm, kappa_fl
     """
     n_ctrl = coef.shape[0]
     last = u.size - 1
+    mean_speed = speed.mean()
     found = np.empty(2 * u.size + breaks.size)
     n = 0
-    # unit tangents at the samples (0 where C' = 0)
-    tangent = np.zeros((u.size, 3))
-    span = degree
-    for q in range(u.size):
-        span = find_span(knots, degree, n_ctrl, u[q], span)
-        _, _, _, dx, dy, dz = point_d1(knots, coef, degree, span, u[q])
-        norm = math.sqrt(dx * dx + dy * dy + dz * dz)
-        if norm > 0.0:
-            tangent[q, 0] = dx / norm
-            tangent[q, 1] = dy / norm
-            tangent[q, 2] = dz / norm
     for q in range(1, last):
-        if speed[q] > speed[q - 1] or speed[q] > speed[q + 1]:
+        if (speed[q] > speed[q - 1] or speed[q] > speed[q + 1]
+                or speed[q] > ZERO_CANDIDATE_REL * mean_speed):
             continue
         if speed[q] <= zero_speed:
             if speed[q - 1] > zero_speed:  # the first sample of a run at rest
@@ -572,15 +570,18 @@ def _stops(knots, coef, degree, breaks, u, speed, zero_speed, floor_mm, kappa_fl
 
 
 @jit
-def _merge(knots, coef, degree, u, kappa, speed, extra, zero_speed):
-    """Step 4a: the sorted union of the nodes and the extra parameters, with kappa and |C'|
-    (a parameter that is already a node keeps the node's values; kappa NaN where |C'| is 0)."""
+def _merge(knots, coef, degree, u, kappa, speed, pts, tan, extra, zero_speed):
+    """Step 4a: the sorted union of the nodes and the extra parameters, with kappa, |C'|, C and
+    the unit tangent (a parameter that is already a node keeps the node's values; kappa NaN
+    where |C'| is 0)."""
     n_ctrl = coef.shape[0]
     extra = np.sort(extra)
     size = u.size + extra.size
     u_out = np.empty(size)
     k_out = np.empty(size)
     s_out = np.empty(size)
+    p_out = np.empty((size, 3))
+    t_out = np.zeros((size, 3))
     i = 0
     j = 0
     n = 0
@@ -593,6 +594,8 @@ def _merge(knots, coef, degree, u, kappa, speed, extra, zero_speed):
             u_out[n] = u[i]
             k_out[n] = kappa[i]
             s_out[n] = speed[i]
+            p_out[n] = pts[i]
+            t_out[n] = tan[i]
             i += 1
         else:
             if n > 0 and u_out[n - 1] == extra[j]:
@@ -604,14 +607,15 @@ def _merge(knots, coef, degree, u, kappa, speed, extra, zero_speed):
             k_out[n], s_out[n] = curvature(c[3], c[4], c[5], c[6], c[7], c[8])
             if s_out[n] <= zero_speed:
                 k_out[n] = math.nan
+            _unit_tangent(c, p_out, t_out, n)
             j += 1
         n += 1
-    return u_out[:n], k_out[:n], s_out[:n]
+    return u_out[:n], k_out[:n], s_out[:n], p_out[:n], t_out[:n]
 
 
 @jit
-def _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed, kappa_floor, zero_speed,
-                              floor_mm):
+def _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed, pts, tan, kappa_floor,
+                              zero_speed, floor_mm):
     """Step 4b: halve every interval across which kappa (above kappa_floor) changes by more than
     KAPPA_STEP_REL, up to REFINE_ROUNDS times, and every interval across which the tangent turns
     by more than its end nodes' kappa explains, up to TURN_REFINE_ROUNDS times.
@@ -626,18 +630,15 @@ def _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed, kappa_floor,
     the kappa of the interval's start. The grid grows at most REFINE_GROWTH_MAX-fold: what a
     refinement stopped there misses, the motion guard (nurbsfeed/safety.py) refuses."""
     n_ctrl = coef.shape[0]
-    pts = np.empty((u.size, 3))
-    tan = np.zeros((u.size, 3))
-    span = degree
-    for q in range(u.size):
-        span = find_span(knots, degree, n_ctrl, u[q], span)
-        c = point_d2(knots, coef, degree, span, u[q])
-        _unit_tangent(c, pts, tan, q)
     most = REFINE_GROWTH_MAX * u.size
+    # only intervals made in the last round are looked at: the others' ends are unchanged
+    fresh = np.ones(u.size, dtype=np.bool_)
     for rounds in range(TURN_REFINE_ROUNDS):
         split = np.zeros(u.size, dtype=np.bool_)
         n_split = 0
         for q in range(u.size - 1):
+            if not fresh[q]:
+                continue
             high = max(kappa[q], kappa[q + 1])
             if (rounds < REFINE_ROUNDS and high > kappa_floor
                     and abs(kappa[q + 1] - kappa[q]) > KAPPA_STEP_REL * high):
@@ -664,6 +665,7 @@ def _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed, kappa_floor,
         s_new = np.empty(size)
         p_new = np.empty((size, 3))
         t_new = np.zeros((size, 3))
+        f_new = np.zeros(size, dtype=np.bool_)
         n = 0
         span = degree
         for q in range(u.size):
@@ -672,6 +674,7 @@ def _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed, kappa_floor,
             s_new[n] = speed[q]
             p_new[n] = pts[q]
             t_new[n] = tan[q]
+            f_new[n] = split[q]
             n += 1
             if split[q]:
                 mid = 0.5 * (u[q] + u[q + 1])
@@ -682,8 +685,9 @@ def _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed, kappa_floor,
                 k_new[n] = k_mid if math.isfinite(k_mid) and s_mid > zero_speed else kappa[q]
                 s_new[n] = s_mid
                 _unit_tangent(c, p_new, t_new, n)
+                f_new[n] = True
                 n += 1
-        u, kappa, speed, pts, tan = u_new, k_new, s_new, p_new, t_new
+        u, kappa, speed, pts, tan, fresh = u_new, k_new, s_new, p_new, t_new, f_new
     return u, kappa, speed
 
 
@@ -705,7 +709,7 @@ def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, f
     """Steps 1-4: nodes u, kappa, |C'| (M,), refined peak parameters (P,), stops (Q,) with
     the cosine of their turn (Q,), and the mean |C'| over the samples (the arc length
     tolerance's scale)."""
-    u, kappa, speed = _samples(knots, coef, degree, breaks, spacing_mm)
+    u, kappa, speed, pts, tan = _samples(knots, coef, degree, breaks, spacing_mm)
     mean_speed = speed.mean()
     zero_speed = ZERO_SPEED_REL * mean_speed
     for q in range(u.size):
@@ -719,7 +723,7 @@ def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, f
                                                 u[idx[k] + 1], kappa_floor)
         peak_u[k] = refined_u if refined_kappa > kappa[idx[k]] else u[idx[k]]
     corner_u = _corners(knots, coef, degree, breaks, floor_mm)
-    zero_u, zero_cos = _stops(knots, coef, degree, breaks, u, speed, zero_speed, floor_mm,
+    zero_u, zero_cos = _stops(knots, coef, degree, breaks, u, speed, tan, zero_speed, floor_mm,
                               kappa_floor)
     stop_u = np.concatenate((corner_u, zero_u))
     stop_cos = np.concatenate((np.zeros(corner_u.size), zero_cos))
@@ -734,9 +738,10 @@ def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, f
         keep[k] = not (q < stop_u.size and stop_u[q] <= u[idx[k] + 1])
     peak_u = peak_u[keep]
     extra = np.concatenate((peak_u, stop_u, extra_u))
-    u, kappa, speed = _merge(knots, coef, degree, u, kappa, speed, extra, zero_speed)
+    u, kappa, speed, pts, tan = _merge(knots, coef, degree, u, kappa, speed, pts, tan, extra,
+                                       zero_speed)
     _fill_singular(kappa)
-    u, kappa, speed = _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed,
+    u, kappa, speed = _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed, pts, tan,
                                                 kappa_floor, zero_speed, floor_mm)
     return u, kappa, speed, peak_u, stop_u, stop_cos, mean_speed
 
