@@ -32,3 +32,20 @@ def butterfly() -> NurbsCurve:
 @pytest.fixture(scope="session")
 def paper_limits() -> Limits:
     return Limits.from_machine(load_machine("paper-table1"))
+
+
+PROFILES = ("default", "paper-table1")
+
+
+def convert_each(sources: list[Path], folder: Path) -> dict[tuple[str, str], Path]:
+    """Every source converted under each built-in profile into folder: {(name, profile): out}."""
+    from nurbsfeed.pipeline import convert_file
+
+    out = {}
+    for source in sources:
+        for profile in PROFILES:
+            target = folder / f"{source.stem}.{profile}.nc"
+            convert_file(source, target, load_machine(profile))
+            out[(source.name, profile)] = target
+    return out
+

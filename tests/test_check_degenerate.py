@@ -16,6 +16,7 @@ from nurbsfeed.analysis.check import project_points
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.machine import load_machine
 from nurbsfeed.pipeline import convert_file
+from tests.conftest import convert_each
 
 DEGENERATE = Path(__file__).parent / "data" / "degenerate"
 CORNER = DEGENERATE / "corner-tripled-point.json"
@@ -30,14 +31,7 @@ def corner_curve() -> NurbsCurve:
 
 @pytest.fixture(scope="module")
 def converted(tmp_path_factory: pytest.TempPathFactory) -> dict[tuple[str, str], Path]:
-    folder = tmp_path_factory.mktemp("degenerate")
-    out = {}
-    for source in sorted(DEGENERATE.glob("*.json")):
-        for profile in ("default", "paper-table1"):
-            target = folder / f"{source.stem}.{profile}.nc"
-            convert_file(source, target, load_machine(profile))
-            out[(source.name, profile)] = target
-    return out
+    return convert_each(sorted(DEGENERATE.glob("*.json")), tmp_path_factory.mktemp("degenerate"))
 
 
 @pytest.mark.parametrize("profile", ["default", "paper-table1"])

@@ -10,8 +10,7 @@ import pytest
 
 from nurbsfeed.analysis import check_files
 from nurbsfeed.machine import load_machine
-from nurbsfeed.pipeline import convert_file
-from tests.conftest import SAMPLES
+from tests.conftest import SAMPLES, convert_each
 
 DATA = Path(__file__).parent / "data" / "check"
 
@@ -79,14 +78,7 @@ def test_the_good_outputs_pass(output: str) -> None:
 
 @pytest.fixture(scope="module")
 def samples_converted(tmp_path_factory: pytest.TempPathFactory) -> dict[tuple[str, str], Path]:
-    folder = tmp_path_factory.mktemp("samples")
-    out = {}
-    for source in sorted(SAMPLES.iterdir()):
-        for profile in ("default", "paper-table1"):
-            target = folder / f"{source.stem}.{profile}.nc"
-            convert_file(source, target, load_machine(profile))
-            out[(source.name, profile)] = target
-    return out
+    return convert_each(sorted(SAMPLES.iterdir()), tmp_path_factory.mktemp("samples"))
 
 
 @pytest.mark.parametrize("profile", ["default", "paper-table1"])
