@@ -581,7 +581,7 @@ def _merge(knots, coef, degree, u, kappa, speed, pts, tan, extra, zero_speed):
     k_out = np.empty(size)
     s_out = np.empty(size)
     p_out = np.empty((size, 3))
-    t_out = np.zeros((size, 3))
+    t_out = np.empty((size, 3))
     i = 0
     j = 0
     n = 0
@@ -594,8 +594,9 @@ def _merge(knots, coef, degree, u, kappa, speed, pts, tan, extra, zero_speed):
             u_out[n] = u[i]
             k_out[n] = kappa[i]
             s_out[n] = speed[i]
-            p_out[n] = pts[i]
-            t_out[n] = tan[i]
+            for d in range(3):
+                p_out[n, d] = pts[i, d]
+                t_out[n, d] = tan[i, d]
             i += 1
         else:
             if n > 0 and u_out[n - 1] == extra[j]:
@@ -652,9 +653,12 @@ def _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed, pts, tan, ka
             if chord <= floor_mm:
                 continue  # no length: nothing between the nodes to plan for
             cos = tan[q, 0] * tan[q + 1, 0] + tan[q, 1] * tan[q + 1, 1] + tan[q, 2] * tan[q + 1, 2]
+            explained = TURN_EXPLAINED * high * chord + TURN_SLACK_RAD
+            # 1 - cos x >= x^2/2 - x^4/24: below that the turn is explained, without an acos
+            if 1.0 - cos <= explained * explained * (0.5 - explained * explained / 24.0):
+                continue
             turn = math.acos(min(1.0, max(-1.0, cos)))
-            if (turn > TURN_EXPLAINED * high * chord + TURN_SLACK_RAD
-                    and turn > kappa_floor * chord):
+            if turn > explained and turn > kappa_floor * chord:
                 split[q] = True
                 n_split += 1
         if n_split == 0 or u.size + n_split > most:
@@ -664,16 +668,17 @@ def _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed, pts, tan, ka
         k_new = np.empty(size)
         s_new = np.empty(size)
         p_new = np.empty((size, 3))
-        t_new = np.zeros((size, 3))
-        f_new = np.zeros(size, dtype=np.bool_)
+        t_new = np.empty((size, 3))
+        f_new = np.empty(size, dtype=np.bool_)
         n = 0
         span = degree
         for q in range(u.size):
             u_new[n] = u[q]
             k_new[n] = kappa[q]
             s_new[n] = speed[q]
-            p_new[n] = pts[q]
-            t_new[n] = tan[q]
+            for i in range(3):  # element by element: a row copy costs numba a slice
+                p_new[n, i] = pts[q, i]
+                t_new[n, i] = tan[q, i]
             f_new[n] = split[q]
             n += 1
             if split[q]:
@@ -698,10 +703,10 @@ def _unit_tangent(c, pts, tan, q):
     pts[q, 1] = c[1]
     pts[q, 2] = c[2]
     norm = math.sqrt(c[3] * c[3] + c[4] * c[4] + c[5] * c[5])
-    if norm > 0.0:
-        tan[q, 0] = c[3] / norm
-        tan[q, 1] = c[4] / norm
-        tan[q, 2] = c[5] / norm
+    inv = 1.0 / norm if norm > 0.0 else 0.0
+    tan[q, 0] = c[3] * inv
+    tan[q, 1] = c[4] * inv
+    tan[q, 2] = c[5] * inv
 
 
 @jit
@@ -760,14 +765,16 @@ def build_grid(curve: NurbsCurve, spacing_mm: float, extra_u: np.ndarray = np.em
         knots, coef, degree, curve.span_breaks, float(spacing_mm),
         np.ascontiguousarray(extra_u, dtype=float), float(kappa_floor), floor_mm)
     # two stops on one node (a corner knot where C' also vanishes) are one: the sharper turn
-    stop_index, first = np.unique(np.searchsorted(u, stop_u), return_index=True)
-    stop_cos = np.minimum.reduceat(stop_cos, first) if stop_cos.size else stop_cos
+    stop_index = np.searchsorted(u, stop_u)
+    if stop_index.size > 1:
+        stop_index, first = np.unique(stop_index, return_index=True)
+        stop_cos = np.minimum.reduceat(stop_cos, first)
     peak_index = np.searchsorted(u, np.sort(peak_u))
     s = simpson_lengths(knots, coef, degree, u, speed, ARC_REL_TOL * (mean_speed + 1e-300))
     # stops with no length between them (a span whose control points are all equal) are one
     # place: the first stands, the others become plain nodes with the kappa that follows them
-    same = np.flatnonzero(np.diff(s[stop_index]) <= floor_mm) + 1
-    if same.size:
+    same = np.flatnonzero(np.diff(s[stop_index]) <= floor_mm) + 1 if stop_index.size > 1 else ()
+    if len(same):
         for n in stop_index[same][::-1]:
             kappa[n] = kappa[n + 1]
         stop_index = np.delete(stop_index, same)

@@ -382,6 +382,8 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
         v, peak, *pieces, key_t, duration, v_nodes, rounds, from_rest = _limit_rounds(
             grid.s_mm, limit, key_node, nominal, cap, hold_start, hold_end, lim.acc_mm_s2,
             lim.jerk_mm_s3, HOLD_MAX_PERIODS * lim.period_s)
+        if not (from_rest >= 0).any():  # (the common case: setdiff1d costs ~50 us)
+            break
         new = np.setdiff1d(from_rest[from_rest >= 0], key_node)
         if new.size == 0 or shoulders.size >= SHOULDER_ROUNDS * max(1, key_node.size):
             break
