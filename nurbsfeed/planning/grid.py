@@ -693,7 +693,7 @@ def _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed, pts, tan, ka
                 f_new[n] = True
                 n += 1
         u, kappa, speed, pts, tan, fresh = u_new, k_new, s_new, p_new, t_new, f_new
-    return u, kappa, speed
+    return u, kappa, speed, pts, tan
 
 
 @jit
@@ -742,12 +742,36 @@ def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, f
         q = np.searchsorted(stop_u, u[idx[k] - 1])
         keep[k] = not (q < stop_u.size and stop_u[q] <= u[idx[k] + 1])
     peak_u = peak_u[keep]
+    peak_u = np.sort(peak_u)
     extra = np.concatenate((peak_u, stop_u, extra_u))
     u, kappa, speed, pts, tan = _merge(knots, coef, degree, u, kappa, speed, pts, tan, extra,
                                        zero_speed)
     _fill_singular(kappa)
-    u, kappa, speed = _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed, pts, tan,
-                                                kappa_floor, zero_speed, floor_mm)
+    u, kappa, speed, pts, tan = _refine_where_kappa_jumps(
+        knots, coef, degree, u, kappa, speed, pts, tan, kappa_floor, zero_speed, floor_mm)
+    # a spike of kappa narrower than the samples shows only in the refined grid: its maxima
+    # at or above kappa_floor that no peak's bracket holds are peaks too (refined likewise)
+    idx = _prominent_maxima(kappa)
+    more = np.empty(idx.size)
+    n_more = 0
+    for k in range(idx.size):
+        low, high = u[idx[k] - 1], u[idx[k] + 1]
+        if kappa[idx[k]] < kappa_floor:
+            continue
+        q = np.searchsorted(peak_u, low)
+        if q < peak_u.size and peak_u[q] <= high:
+            continue
+        q = np.searchsorted(stop_u, low)
+        if q < stop_u.size and stop_u[q] <= high:
+            continue
+        refined_u, refined_kappa = _refine_peak(knots, coef, degree, low, high, kappa_floor)
+        more[n_more] = refined_u if refined_kappa > kappa[idx[k]] else u[idx[k]]
+        n_more += 1
+    if n_more:
+        u, kappa, speed, pts, tan = _merge(knots, coef, degree, u, kappa, speed, pts, tan,
+                                           more[:n_more], zero_speed)
+        _fill_singular(kappa)
+        peak_u = np.sort(np.concatenate((peak_u, more[:n_more])))
     return u, kappa, speed, peak_u, stop_u, stop_cos, mean_speed
 
 
