@@ -321,9 +321,9 @@ def test_unknown_position_skips_the_check_for_programmed_axes() -> None:
     text = ("G21 G90 G0 X0 Y0 Z5\nG91 G28 Z0\nG90\n"
             "G06.2 P3 K0 X0 Y0 Z-1 F900\nK0 X10 Y10\nK0 X20 Y0\nK1\nK1\nK1\n")
     assert only_curve(text).curve.points[0].tolist() == [0, 0, -1]
-    omitted = text.replace("Z-1 F900", "F900")
+    moved_later = text.replace("Z-1 F900", "F900").replace("K0 X20 Y0", "K0 X20 Y0 Z-1")
     with pytest.raises(InputError, match=r"^t.nc:4:1: Z is unknown here \(after G28 on line 2\)"):
-        read(omitted)
+        read(moved_later)
 
 
 @pytest.mark.parametrize("before", [
@@ -352,7 +352,7 @@ def test_position_tracking(before: str) -> None:
      "after axis words with no motion mode in effect on line 7"),
 ])
 def test_what_loses_z(before: str, lost: str) -> None:
-    text = "G21 G90\n" + before + "G06.2 P3 K0 X1 Y0 F40\nK0 X2 Y1\nK0 X3 Y0\nK1\nK1\nK1\n"
+    text = "G21 G90\n" + before + "G06.2 P3 K0 X1 Y0 F40\nK0 X2 Y1\nK0 X3 Y0 Z1\nK1\nK1\nK1\n"
     with pytest.raises(InputError, match=rf"Z is unknown here \({re.escape(lost)}\)"):
         read(text)
 

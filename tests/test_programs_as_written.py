@@ -1,0 +1,79 @@
+"""Issue 12: programs as people write them. LinuxCNC's own G5.2 example in each plane converts
+without the axis it never sets; with an unknown axis, a line's own error is reported as that."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from nurbsfeed.cli import main
+from nurbsfeed.errors import CurveError
+from nurbsfeed.gcode import read_gcode
+from nurbsfeed.program import CurveBlock, PassThrough
+from tests.conftest import SAMPLES
+
+
+def convert(source: Path, tmp_path: Path) -> str:
+    target = tmp_path / "out.nc"
+    result = CliRunner().invoke(main, ["convert", str(source), "-o", str(target)],
+                                catch_exceptions=False)
+    assert result.exit_code == 0, result.stderr
+    return target.read_text()
+
+
+def read(text: str) -> list:
+    return list(read_gcode(Path("t.nc"), text, "auto"))
+
+
+@pytest.mark.parametrize(("name", "unset"), [("xy", "Z"), ("yz", "X"), ("zx", "Y")])
+def test_linuxcnc_reference_example_converts_without_its_unset_axis(tmp_path: Path, name: str,
+                                                                     unset: str) -> None:
+    source = SAMPLES / f"linuxcnc-nurbs-{name}.ngc"
+    out = convert(source, tmp_path)
+    written = out.splitlines()
+    comment = next(i for i, line in enumerate(written) if line.startswith("(nurbsfeed: curve"))
+    moves = written[comment + 1:-2]  # up to the restored F and M2
+    assert len(moves) > 100
+    assert moves[0].startswith("G1 ")
+    assert not any(re.search(unset, move) for move in moves)
+    plane = {"xy": "XY", "yz": "YZ", "zx": "ZX"}[name]
+    assert {letter for move in moves for letter in re.findall("[XYZ]", move)} == set(plane)
+    # everything else passes through byte for byte
+    source_lines = source.read_text().splitlines()
+    assert written[:comment] == source_lines[:comment]
+    assert written[-2:] == ["F100.", "M2"]
+
+
+def test_an_unknown_held_axis_stays_unknown_after_the_curve() -> None:
+    text = ("G17 G21 G0 X0 Y0\nF100\nG5.2 X0 Y1 P1 L3\nX2 Y2 P1\nX2 Y0 P1\nX0 Y0 P2\nG5.3\n"
+            "G5.2\nX1 Y1 P1\nX2 Y0 P1\nG5.3\n")
+    blocks = [item for item in read(text) if isinstance(item, CurveBlock)]
+    assert len(blocks) == 2
+    assert all((block.curve.points[:, 2] == 0.0).all() for block in blocks)  # held, not written
+    fanuc = "G21 G90 G0 X0 Y0\nF900\nG06.2 P3 K0 X0 Y0\nK0 X10 Y10\nK0 X20 Y0\nK1\nK1\nK1\n"
+    after = fanuc + "G1 X5\nG06.2 P3 K0 X5 Y0\nK0 X10 Y10\nK0 X20 Y0 Z1\nK1\nK1\nK1\n"
+    with pytest.raises(Exception, match=r"^t.nc:10:1: Z is unknown here \(no move has set it"):
+        read(after)
+    assert sum(isinstance(item, PassThrough) for item in read(fanuc)) == 2
+
+
+FANUC_UNKNOWN_Z = "G21 G90 G0 X0 Y0\nF900\nG06.2 P3 K0 X0 Y0\nK0 X10 Y10\nK0 X20 Y0\n{}\nK1\nK1\nK1\n"
+
+
+@pytest.mark.parametrize(("line", "message"), [
+    ("K-1 X30 Y5", r"^t.nc:6:1: K-1: knots must not decrease"),
+    ("K0.5 X30 Y5 R-1", r"^t.nc:6:13: R-1: a weight R must be positive"),
+    ("K0.5 X30 Y5 Z1 R-1", r"^t.nc:6:16: R-1: a weight R must be positive"),
+])
+def test_fanuc_line_errors_come_before_an_unknown_axis(line: str, message: str) -> None:
+    with pytest.raises(CurveError, match=message):
+        read(FANUC_UNKNOWN_Z.format(line))
+
+
+def test_linuxcnc_weight_error_comes_before_an_unknown_plane_axis() -> None:
+    text = "G17 G21 G0 Y0\nF100\nG5.2\nX1 Y1 P1\nX2 Y0 P-1\nG5.3\n"
+    with pytest.raises(CurveError, match=r"^t.nc:5:7: P-1: a weight P must be positive"):
+        read(text)
