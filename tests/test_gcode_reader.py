@@ -373,10 +373,11 @@ def test_feed_in_force_before_the_block_holds_until_a_control_point_changes_it()
     assert block.feed_word_after == "F300."
 
 
-def test_comment_lines_inside_a_block_are_part_of_it() -> None:
+def test_comment_lines_inside_a_block_are_kept_before_it() -> None:
     text = PREAMBLE + "G06.2 P3 K0 X0 Y0 F500\n(mid-curve note)\n\nK0 X1 Y1\nK0 X2 Y0\nK1\nK1\nK1\n"
     items = read(text)
-    assert [type(item).__name__ for item in items] == ["PassThrough"] * 2 + ["CurveBlock"]
+    assert [type(item).__name__ for item in items] == ["PassThrough"] * 3 + ["CurveBlock"]
+    assert items[2] == PassThrough("(mid-curve note)\n\n")
 
 
 def test_the_reader_streams() -> None:

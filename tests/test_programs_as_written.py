@@ -77,3 +77,32 @@ def test_linuxcnc_weight_error_comes_before_an_unknown_plane_axis() -> None:
     text = "G17 G21 G0 Y0\nF100\nG5.2\nX1 Y1 P1\nX2 Y0 P-1\nG5.3\n"
     with pytest.raises(CurveError, match=r"^t.nc:5:7: P-1: a weight P must be positive"):
         read(text)
+
+
+G52_WITH_LINES = ("G17 G21 G0 X0 Y0 Z0\nF600\nG5.2 X0 Y1 P1 L3\n(first comment)\n     X2 Y2 P1\n"
+                  "\nN35\n; semicolon line\n     X2 Y0 P1\n(MSG, halfway)\n     X0 Y0 P2\nG5.3\nM2\n")
+G62_WITH_LINES = ("G21 G90 G0 X0 Y0 Z0\r\nF900\r\nG06.2 P3 K0 X0 Y0\r\n(c1)\r\nK0 X10 Y10\r\n\r\n"
+                  "K0 X20 Y0\r\n; c2\r\nK1\r\nN10\r\nK1\r\n  (MSG, done)\r\nK1\r\nM30\r\n")
+
+
+@pytest.mark.parametrize(("text", "kept"), [
+    (G52_WITH_LINES, "(first comment)\n\nN35\n; semicolon line\n(MSG, halfway)\n"),
+    (G62_WITH_LINES, "(c1)\r\n\r\n; c2\r\nN10\r\n  (MSG, done)\r\n"),
+], ids=["linuxcnc-g5.2", "fanuc-g06.2"])
+def test_lines_inside_a_nurbs_block_are_kept_in_order_before_its_moves(
+        tmp_path: Path, text: str, kept: str) -> None:
+    items = read(text)
+    curve = next(i for i, item in enumerate(items) if isinstance(item, CurveBlock))
+    assert items[curve - 1] == PassThrough(kept)
+    source = tmp_path / ("in.ngc" if "G5.2" in text else "in.nc")
+    source.write_bytes(text.encode())
+    target = tmp_path / "out.nc"
+    result = CliRunner().invoke(main, ["convert", str(source), "-o", str(target)],
+                                catch_exceptions=False)
+    assert result.exit_code == 0, result.stderr
+    out = target.read_bytes().decode()
+    comment = out.index("(nurbsfeed: curve 0")
+    assert out[:comment].endswith(kept)
+    assert out.count(kept) == 1
+    check = CliRunner().invoke(main, ["check", str(source), str(target)], catch_exceptions=False)
+    assert check.exit_code == 0, check.stdout

@@ -6,7 +6,9 @@ result, and `take_run` reads a whole run of such lines at once in compiled code,
 `take_knot_line` reads a plain closing "K_" line the same way)
 -> if a NURBS block is open, its reader
 (`fanuc.NurbsCurveReader` or `linuxcnc.G52BlockReader`) takes the block, and the CurveBlock is
-yielded when the block completes; otherwise `_start` decides whether the block opens a NURBS
+yielded when the block completes, after the comment, blank and N-only lines read inside it (kept,
+in order, as one PassThrough: they come out right before the block's moves); a `%` inside a block
+is an error; otherwise `_start` decides whether the block opens a NURBS
 block, and if not `modal.ModalState.apply` executes it and the line passes through unchanged.
 Parameter assignments take effect after their line.
 
@@ -25,7 +27,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from pathlib import Path
 
-from nurbsfeed.errors import InputError
+from nurbsfeed.errors import InputError, Location
 from nurbsfeed.gcode.fanuc import NurbsCurveReader
 from nurbsfeed.gcode.linuxcnc import G52BlockReader
 from nurbsfeed.gcode.modal import AXES, G5_2, G5_3, G6_2, NO_POSITION_EFFECT, ModalState
@@ -41,7 +43,8 @@ def read_gcode(path: Path, text: str, dialect: str = "auto") -> Iterator[Program
     """The program in `text` (read from `path`) as items in file order, streamed.
 
     `text` keeps its line endings; the PassThrough texts and the lines the CurveBlocks stand for
-    concatenate to it exactly. Raises InputError (or CurveError) at FILE:LINE:COL of the word at
+    concatenate to it exactly, except that the comment, blank and N-only lines inside a NURBS
+    block come (in order) right before its CurveBlock. Raises InputError (or CurveError) at FILE:LINE:COL of the word at
     fault, when the stream reaches it; an unknown dialect is refused at once.
     """
     if dialect not in DIALECTS:
@@ -60,6 +63,7 @@ class _Reader:
         self.open: NurbsCurveReader | G52BlockReader | None = None
         self.eol = "\n"
         self.last_curve: NurbsCurveReader | None = None  # the modal G6.2 curve's rules
+        self.kept: list[str] = []  # the inert lines inside the open block, yielded before it
 
     def items(self, text: str) -> Iterator[ProgramItem]:
         program = ProgramCodes.of(text)
@@ -88,14 +92,20 @@ class _Reader:
                 closed = self.open.take_knot_line(line_text, line)
                 if closed is not None:  # a closing knot
                     if closed:
-                        yield self._curve_block(self.open.finish())
-                        self.open = None
+                        yield from self._close()
                     continue
             block = tokenize_line(line_text, line, self.path, self.params)
             if self.open is not None:
-                if self.open.take(block):
-                    yield self._curve_block(self.open.finish())
-                    self.open = None
+                if block.delimiter:
+                    body = line_text.rstrip("\r\n")
+                    raise InputError("'%' (start or end of the program) inside a NURBS block: "
+                                     "the block has not ended here",
+                                     Location(self.path, line,
+                                              len(body) - len(body.lstrip(" \t\r")) + 1))
+                if block.is_inert:  # a comment, blank or N-only line: kept, in order
+                    self.kept.append(line_text)
+                elif self.open.take(block):
+                    yield from self._close()
             else:
                 self.open = self._start(block)
                 if self.open is None:
@@ -107,6 +117,16 @@ class _Reader:
                 self.params[assignment.number] = assignment.param
         if self.open is not None:
             raise self.open.unfinished()
+
+    def _close(self) -> Iterator[ProgramItem]:
+        """The kept lines of the block just completed, then its CurveBlock."""
+        assert self.open is not None, "called when a block completes"
+        finished = self.open.finish()
+        if self.kept:
+            yield PassThrough("".join(self.kept))
+            self.kept = []
+        yield self._curve_block(finished)
+        self.open = None
 
     def _start(self, block: Block) -> NurbsCurveReader | G52BlockReader | None:
         """The reader of the NURBS block this block opens, or None for an ordinary block."""
