@@ -106,3 +106,30 @@ def test_lines_inside_a_nurbs_block_are_kept_in_order_before_its_moves(
     assert out.count(kept) == 1
     check = CliRunner().invoke(main, ["check", str(source), str(target)], catch_exceptions=False)
     assert check.exit_code == 0, check.stdout
+
+
+CURVE = '"degree": 2, "knots": [0, 0, 0, 1, 1, 1], "control_points": [[0, 0, 0], [1, 1, 0], [2, 0, 0]]'
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ('{' + CURVE.replace('[0, 0, 0, 1', '[0, 0, "0", 1') + '}',
+     r'1:15: curves\[0\]: knots\[2\] must be a number, not "0" \(a string\)'),
+    ('{' + CURVE.replace('[1, 1, 0]', '[1, true, 0]') + '}',
+     r"1:44: curves\[0\]: control_points\[1\]\[1\] must be a number, not true \(a boolean\)"),
+    ('{' + CURVE + ', "weights": [1, "2", 1]}',
+     r'1:\d+: curves\[0\]: weights\[1\] must be a number, not "2" \(a string\)'),
+    ('{' + CURVE + ', "weights": [1, null, 1]}',
+     r"1:\d+: curves\[0\]: weights\[1\] must be a number, not null$"),
+    ('{"units": "mm", "curves": [{' + CURVE + '}], "feedrate": 3}',
+     r"1:\d+: unknown key 'feedrate' \(known: curves, units\)"),
+    ('{' + CURVE + ', "feedrate": 3}', r"1:\d+: curves\[0\]: unknown key 'feedrate'"),
+])
+def test_json_values_of_the_wrong_type_and_unknown_keys_are_refused(
+        tmp_path: Path, text: str, message: str) -> None:
+    source = tmp_path / "c.json"
+    source.write_text(text)
+    result = CliRunner().invoke(main, ["convert", str(source), "-o", str(tmp_path / "o.nc")])
+    assert result.exit_code == 2
+    assert re.search(rf"^{re.escape(str(source))}:{message}", result.stderr.strip(), re.M), \
+        result.stderr
+    assert not (tmp_path / "o.nc").exists()

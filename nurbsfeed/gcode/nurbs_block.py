@@ -85,8 +85,13 @@ def check_block(block: Block, state: ModalState, allowed_letters: str, allowed_g
     """
     check_no_assignments(block, state)
     seen: set[str] = set()
+    codes: set[tuple[str, int]] = set()
     for word in block.words:
-        if word.letter in seen and word.letter not in "GM":
+        if word.letter in "GM":
+            if (word.letter, word.code) in codes:
+                raise InputError(f"{word.name} appears twice in one block", state.where(word))
+            codes.add((word.letter, word.code))
+        elif word.letter in seen:
             raise InputError(f"{word.letter} appears twice in one block", state.where(word))
         seen.add(word.letter)
     allowed_g = set(allowed_g)

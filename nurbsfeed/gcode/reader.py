@@ -144,6 +144,11 @@ class _Reader:
                                  "linuxcnc (or auto)", state.where(g[G5_2]))
             return G52BlockReader(block, state, g[G5_2])
         if G5_3 in g:
+            typo = state.unknown_g
+            if typo is not None:
+                raise InputError(f"{typo.name} is a G code nurbsfeed does not know, and the G5.3 "
+                                 f"on line {block.line} closes a NURBS block nothing opened: "
+                                 "write G5.2 to open it", state.where(typo))
             raise InputError("G5.3 without G5.2 first (LinuxCNC: Cannot use G5.3 without G5.2 "
                              "first)", state.where(g[G5_3]))
         previous = self.last_curve
