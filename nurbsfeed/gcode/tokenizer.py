@@ -7,8 +7,8 @@ The lexical rules, shared by Fanuc and LinuxCNC programs:
   words like any other. A number without a decimal point means its face value (`X10` is 10.0, the
   "calculator-type" input of LinuxCNC and of Fanuc with parameter DPI set); the digits written
   after the point are kept as `Word.decimals`, the precision the program was written to. Digits
-  are ASCII 0-9: full-width or Arabic-Indic digits (which Python's `\d` and float() accept) are
-  refused with their own message.
+  are ASCII 0-9: full-width or Arabic-Indic digits (which a regex digit class and float() accept)
+  are refused with their own message.
 - Comments: `( ... )` anywhere, `;` to the end of the line.
 - `%` alone at the start of a line is the program delimiter; the line has no words.
 - `/` (optionally `/1`..`/9`, Fanuc optional block skip) as the first character: block delete.
