@@ -69,6 +69,7 @@ def _text_location(text: str, path: str, pos: int) -> Location:
 def read_json_curves(path: Path, text: str) -> tuple[str, list[tuple[NurbsCurve, float]]]:
     """Parse and validate: (units, [(curve, feed_mm_s or inf)])."""
     where = str(path)
+    text = text.removeprefix("\ufeff")  # a UTF-8 BOM (json.loads refuses it)
     try:
         data = json.loads(text, parse_constant=_reject_constants)
     except json.JSONDecodeError as exc:
@@ -148,6 +149,7 @@ def _fmt(value: float, decimals: int) -> str:
 
 def json_program(path: Path, text: str, decimals: int = 4) -> Iterator[ProgramItem]:
     """The JSON file as a program stream: header lines, then per curve a G0 and the curve."""
+    text = text.removeprefix("\ufeff")
     units, curves = read_json_curves(path, text)
     yield PassThrough(f"(nurbsfeed: {len(curves)} curve(s) from {path.name})\n")
     yield PassThrough(("G21" if units == "mm" else "G20") + " G90\n")

@@ -133,3 +133,55 @@ def test_json_values_of_the_wrong_type_and_unknown_keys_are_refused(
     assert re.search(rf"^{re.escape(str(source))}:{message}", result.stderr.strip(), re.M), \
         result.stderr
     assert not (tmp_path / "o.nc").exists()
+
+
+def convert_bytes(tmp_path: Path, data: bytes, name: str = "in.ngc") -> bytes:
+    source = tmp_path / name
+    source.write_bytes(data)
+    target = tmp_path / "out.nc"
+    result = CliRunner().invoke(main, ["convert", str(source), "-o", str(target)],
+                                catch_exceptions=False)
+    assert result.exit_code == 0, result.stderr
+    return target.read_bytes()
+
+
+def test_a_utf8_bom_is_accepted_and_kept(tmp_path: Path) -> None:
+    program = (SAMPLES / "linuxcnc-nurbs-xy.ngc").read_bytes()
+    out = convert_bytes(tmp_path, b"\xef\xbb\xbf" + program)
+    assert out.startswith(b"\xef\xbb\xbf" + program[:program.index(b"F100\n") + 5])
+    assert out == b"\xef\xbb\xbf" + convert_bytes(tmp_path, program)
+    json_bom = b"\xef\xbb\xbf" + (SAMPLES / "circle.json").read_bytes()
+    assert convert_bytes(tmp_path, json_bom, "c.json").count(b"\nG1 ") == 1
+
+
+def test_cr_only_line_endings_are_lines(tmp_path: Path) -> None:
+    program = (SAMPLES / "linuxcnc-nurbs-xy.ngc").read_bytes()
+    out = convert_bytes(tmp_path, program.replace(b"\n", b"\r"))
+    assert b"\n" not in out
+    assert out == convert_bytes(tmp_path, program).replace(b"\n", b"\r")
+    assert out.count(b"\rX") > 100
+
+
+def profile(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "m.yaml"
+    path.write_text("period_s: 0.001\nmax_feed_mm_s: 100\nchord_error_mm: 0.001\n"
+                    "max_acc_mm_s2: 2000\nmax_normal_acc_mm_s2: 2000\n"
+                    "max_normal_jerk_mm_s3: 50000\n" + text)
+    return path
+
+
+def test_yaml_exponent_without_point_or_sign_is_a_number(tmp_path: Path) -> None:
+    from nurbsfeed.machine import load_machine
+
+    assert load_machine(str(profile(tmp_path, "max_jerk_mm_s3: 1.0e9\n"))).max_jerk_mm_s3 == 1e9
+    assert load_machine(str(profile(tmp_path, "max_jerk_mm_s3: 5E4\n"))).max_jerk_mm_s3 == 5e4
+
+
+def test_yaml_duplicate_key_is_refused_at_the_second(tmp_path: Path) -> None:
+    from nurbsfeed.errors import ProfileError
+    from nurbsfeed.machine import load_machine
+
+    path = profile(tmp_path, "max_jerk_mm_s3: 50000\nperiod_s: 0.002\n")
+    with pytest.raises(ProfileError, match=r"m.yaml:8:1: not valid YAML \(key 'period_s' appears "
+                                           r"twice\)"):
+        load_machine(str(path))

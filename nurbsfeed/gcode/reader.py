@@ -37,6 +37,7 @@ from nurbsfeed.gcode.tokenizer import Block, Param, tokenize_line
 from nurbsfeed.program import CurveBlock, PassThrough, ProgramItem
 
 DIALECTS = ("auto", "fanuc", "linuxcnc")
+BOM = "\ufeff"
 
 
 def read_gcode(path: Path, text: str, dialect: str = "auto") -> Iterator[ProgramItem]:
@@ -66,6 +67,12 @@ class _Reader:
         self.kept: list[str] = []  # the inert lines inside the open block, yielded before it
 
     def items(self, text: str) -> Iterator[ProgramItem]:
+        if text.startswith(BOM):  # kept byte for byte, and not part of the first line
+            yield PassThrough(BOM)
+            text = text[len(BOM):]
+        # "\n" ends a line (a lone "\r" inside one is a space), except in a file whose lines all
+        # end in "\r" (classic Mac OS): read as one line, it would convert nothing
+        newline = "\r" if "\n" not in text and "\r" in text else "\n"
         program = ProgramCodes.of(text)
         # Once a scan reads no line, the next waits for a line take_line reads: where a program
         # writes its points in another form (N words, F on every line), a scan per line would
@@ -82,7 +89,7 @@ class _Reader:
                     pos = after
                     continue
                 scan = False
-            end = text.find("\n", pos) + 1 or len(text)  # only "\n" ends a line
+            end = text.find(newline, pos) + 1 or len(text)
             line_text = text[pos:end]
             pos = end
             if isinstance(self.open, NurbsCurveReader):  # plain lines, read straight from text
@@ -112,7 +119,7 @@ class _Reader:
                     self.state.apply(block)
                     yield PassThrough(line_text)
                 else:
-                    self.eol = block.eol or "\n"
+                    self.eol = block.eol or newline
             for assignment in block.assignments:
                 self.params[assignment.number] = assignment.param
         if self.open is not None:
