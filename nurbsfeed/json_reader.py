@@ -114,7 +114,8 @@ def read_json_curves(path: Path, text: str) -> tuple[str, list[tuple[NurbsCurve,
                 raise InputError(f"curves[{i}]: {wrong}", _key_location(text, where, key, i))
         try:
             curve = NurbsCurve.build(raw["degree"], raw["knots"], raw["control_points"],
-                                     raw.get("weights"), str(raw.get("name", f"curve{i}")))
+                                     raw.get("weights"),
+                                     comment_safe(str(raw.get("name", f"curve{i}"))))
         except CurveError as exc:
             field = _field_of(exc.message)
             raise CurveError(f"curves[{i}]: {exc.message}",
@@ -140,6 +141,14 @@ def _field_of(message: str) -> str:
     return "control_points"
 
 
+def comment_safe(text: str) -> str:
+    """`text` fit to sit inside a G-code comment "( ... )": parentheses become brackets (one ")"
+    would end the comment early, and nurbsfeed itself refuses an unclosed "("), and line breaks,
+    other control characters and anything unprintable (undecodable bytes) become "?"."""
+    return "".join("[" if ch == "(" else "]" if ch == ")" else ch if ch.isprintable() else "?"
+                   for ch in text)
+
+
 def _fmt(value: float, decimals: int) -> str:
     text = f"{value:.{decimals}f}".rstrip("0")
     if text in ("-0.", "-"):
@@ -151,7 +160,7 @@ def json_program(path: Path, text: str, decimals: int = 4) -> Iterator[ProgramIt
     """The JSON file as a program stream: header lines, then per curve a G0 and the curve."""
     text = text.removeprefix("\ufeff")
     units, curves = read_json_curves(path, text)
-    yield PassThrough(f"(nurbsfeed: {len(curves)} curve(s) from {path.name})\n")
+    yield PassThrough(f"(nurbsfeed: {len(curves)} curve(s) from {comment_safe(path.name)})\n")
     yield PassThrough(("G21" if units == "mm" else "G20") + " G90\n")
     for i, (curve, feed_mm_s) in enumerate(curves):
         start = curve.points[0]

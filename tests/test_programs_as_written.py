@@ -185,3 +185,18 @@ def test_yaml_duplicate_key_is_refused_at_the_second(tmp_path: Path) -> None:
     with pytest.raises(ProfileError, match=r"m.yaml:8:1: not valid YAML \(key 'period_s' appears "
                                            r"twice\)"):
         load_machine(str(path))
+
+
+@pytest.mark.parametrize("name", ["part(1).json", "a)\nG0 Z-50 (b.json", "tab\tand\x7f.json"])
+def test_a_json_file_name_cannot_break_or_inject_into_the_header(tmp_path: Path,
+                                                                 name: str) -> None:
+    text = (SAMPLES / "circle.json").read_text()
+    text = text.replace('"name": "circle"', '"name": "ci(r)cle\\u000b\\u2028"')
+    out = convert_bytes(tmp_path, text.encode(), name).decode()
+    header, second = out.splitlines()[:2]
+    assert header.startswith("(nurbsfeed: 1 curve(s) from ") and header.endswith(")")
+    # the header's own "curve(s)" is the one nested pair left (see the issue 12 report)
+    named = header.replace("curve(s)", "curves")
+    assert named.count("(") == 1 and named.count(")") == 1
+    assert header.isprintable() and second == "G21 G90"
+    assert "curve 0 ci[r]cle??," in out
