@@ -25,7 +25,7 @@ from tests.bench.programs import fanuc_program
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLES = ROOT / "samples"
 BAD = Path(__file__).resolve().parent / "data" / "bad_gcode"
-PREAMBLE = "G17 G21 G90 G94\nG0 X0 Y0 Z0\n"
+PREAMBLE = "G17 G21 G90 G94\nG0 X0 Y0 Z0 F600\n"
 
 
 def source_lines(text: str) -> list[str]:
@@ -258,10 +258,9 @@ def test_fanuc_g91_control_points_are_relative_to_the_previous_one() -> None:
 
 def test_linuxcnc_g5_2_g91_points_are_relative_to_the_block_start() -> None:
     """interp_convert.cc find_ends adds the current position, which moves only at G5.3."""
-    block = only_curve("G21 G90 G0 X1 Y2 Z3\nG91\nG5.2\nX1 Y1 P1\nX2 Y0 P1\nG5.3\n")
+    block = only_curve("G21 G90 G0 X1 Y2 Z3\nG91\nG5.2\nX1 Y1 P1\nX2 Y0 P1 F60\nG5.3\n")
     assert_curve(block, 2, [0, 0, 0, 1, 1, 1], [[1, 2, 3], [2, 3, 3], [3, 2, 3]])
-    assert block.incremental and block.feed_word_after is None
-    assert np.isinf(block.feed_mm_s).all()  # no F was ever programmed
+    assert block.incremental and block.feed_word_after == "F60."
 
 
 @pytest.mark.parametrize("plane, words, points", [
@@ -269,7 +268,7 @@ def test_linuxcnc_g5_2_g91_points_are_relative_to_the_block_start() -> None:
     ("G19", ["Y1 Z1", "Y2 Z0"], [[1, 2, 3], [1, 1, 1], [1, 2, 0]]),
 ])
 def test_g5_2_plane_holds_the_third_axis(plane: str, words: list, points: list) -> None:
-    text = f"G21 G90 G0 X1 Y2 Z3\n{plane}\nG5.2\n{words[0]} P1\n{words[1]} P1\nG5.3\n"
+    text = f"G21 G90 G0 X1 Y2 Z3 F600\n{plane}\nG5.2\n{words[0]} P1\n{words[1]} P1\nG5.3\n"
     assert_curve(only_curve(text), 2, [0, 0, 0, 1, 1, 1], points)
 
 
@@ -348,7 +347,7 @@ def test_position_tracking(before: str) -> None:
     ("G0 X1 Y0 Z0\nG31 Z-10 F100\n", "after G31 on line 3"),
     ("G0 X1 Y0 Z0\nM98 P100\n", "after M98 on line 3"),
     ("G0 X1 Y0 Z0\nG200 Z4\n", "after G200 on line 3, a G code nurbsfeed does not interpret"),
-    ("G0 X1 Y0 Z0\nG5.2\nX2 Y1 P1\nX1 Y0 P1\nG5.3\nZ1\n",
+    ("G0 X1 Y0 Z0 F600\nG5.2\nX2 Y1 P1\nX1 Y0 P1\nG5.3\nZ1\n",
      "after axis words with no motion mode in effect on line 7"),
 ])
 def test_what_loses_z(before: str, lost: str) -> None:
