@@ -60,7 +60,8 @@ def test_an_unknown_held_axis_stays_unknown_after_the_curve() -> None:
     assert sum(isinstance(item, PassThrough) for item in read(fanuc)) == 2
 
 
-FANUC_UNKNOWN_Z = "G21 G90 G0 X0 Y0\nF900\nG06.2 P3 K0 X0 Y0\nK0 X10 Y10\nK0 X20 Y0\n{}\nK1\nK1\nK1\n"
+FANUC_UNKNOWN_Z = ("G21 G90 G0 X0 Y0\nF900\nG06.2 P3 K0 X0 Y0\nK0 X10 Y10\nK0 X20 Y0\n{}\n"
+                   "K1\nK1\nK1\n")
 
 
 @pytest.mark.parametrize(("line", "message"), [
@@ -79,8 +80,9 @@ def test_linuxcnc_weight_error_comes_before_an_unknown_plane_axis() -> None:
         read(text)
 
 
-G52_WITH_LINES = ("G17 G21 G0 X0 Y0 Z0\nF600\nG5.2 X0 Y1 P1 L3\n(first comment)\n     X2 Y2 P1\n"
-                  "\nN35\n; semicolon line\n     X2 Y0 P1\n(MSG, halfway)\n     X0 Y0 P2\nG5.3\nM2\n")
+G52_WITH_LINES = ("G17 G21 G0 X0 Y0 Z0\nF600\nG5.2 X0 Y1 P1 L3\n(first comment)\n"
+                  "     X2 Y2 P1\n\nN35\n; semicolon line\n     X2 Y0 P1\n(MSG, halfway)\n"
+                  "     X0 Y0 P2\nG5.3\nM2\n")
 G62_WITH_LINES = ("G21 G90 G0 X0 Y0 Z0\r\nF900\r\nG06.2 P3 K0 X0 Y0\r\n(c1)\r\nK0 X10 Y10\r\n\r\n"
                   "K0 X20 Y0\r\n; c2\r\nK1\r\nN10\r\nK1\r\n  (MSG, done)\r\nK1\r\nM30\r\n")
 
@@ -108,7 +110,8 @@ def test_lines_inside_a_nurbs_block_are_kept_in_order_before_its_moves(
     assert check.exit_code == 0, check.stdout
 
 
-CURVE = '"degree": 2, "knots": [0, 0, 0, 1, 1, 1], "control_points": [[0, 0, 0], [1, 1, 0], [2, 0, 0]]'
+CURVE = ('"degree": 2, "knots": [0, 0, 0, 1, 1, 1], '
+         '"control_points": [[0, 0, 0], [1, 1, 0], [2, 0, 0]]')
 
 
 @pytest.mark.parametrize(("text", "message"), [

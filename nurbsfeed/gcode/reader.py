@@ -45,8 +45,9 @@ def read_gcode(path: Path, text: str, dialect: str = "auto") -> Iterator[Program
 
     `text` keeps its line endings; the PassThrough texts and the lines the CurveBlocks stand for
     concatenate to it exactly, except that the comment, blank and N-only lines inside a NURBS
-    block come (in order) right before its CurveBlock. Raises InputError (or CurveError) at FILE:LINE:COL of the word at
-    fault, when the stream reaches it; an unknown dialect is refused at once.
+    block come (in order) right before its CurveBlock, and a BOM comes first on its own.
+    Raises InputError (or CurveError) at FILE:LINE:COL of the word at fault, when the stream
+    reaches it; an unknown dialect is refused at once.
     """
     if dialect not in DIALECTS:
         raise InputError(f"unknown G-code dialect '{dialect}' (use auto, fanuc or linuxcnc)")
