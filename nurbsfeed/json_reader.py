@@ -19,6 +19,28 @@ from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.program import CurveBlock, PassThrough, ProgramItem
 
 CURVE_KEYS = {"name", "degree", "knots", "control_points", "weights", "feed"}
+FILE_KEYS = {"units", "curves"}  # a file of curves (a single curve object: CURVE_KEYS, units)
+
+
+def _is_number(value: Any) -> bool:
+    """A JSON number: int or float, never a bool (json reads true as True, an int subclass)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _not_number(value: Any, at: str) -> str | None:
+    """Where `value` (a number, or nested lists of them) holds something else, and what."""
+    if isinstance(value, list):
+        for j, item in enumerate(value):
+            found = _not_number(item, f"{at}[{j}]")
+            if found is not None:
+                return found
+        return None
+    if _is_number(value):
+        return None
+    if value is None:
+        return f"{at} must be a number, not null"
+    kind = {str: "a string", bool: "a boolean"}.get(type(value), "an object")
+    return f"{at} must be a number, not {json.dumps(value)} ({kind})"
 
 
 def _key_location(text: str, path: str, key: str, occurrence: int) -> Location:
@@ -47,6 +69,7 @@ def _text_location(text: str, path: str, pos: int) -> Location:
 def read_json_curves(path: Path, text: str) -> tuple[str, list[tuple[NurbsCurve, float]]]:
     """Parse and validate: (units, [(curve, feed_mm_s or inf)])."""
     where = str(path)
+    text = text.removeprefix("\ufeff")  # a UTF-8 BOM (json.loads refuses it)
     try:
         data = json.loads(text, parse_constant=_reject_constants)
     except json.JSONDecodeError as exc:
@@ -62,6 +85,10 @@ def read_json_curves(path: Path, text: str) -> tuple[str, list[tuple[NurbsCurve,
     if units not in ("mm", "in"):
         raise InputError(f"'units' must be \"mm\" or \"in\", not {units!r}",
                          _key_location(text, where, "units", 0))
+    unknown_top = sorted(set(data) - FILE_KEYS) if "curves" in data else []
+    if unknown_top:  # (a single curve object's keys are checked as curves[0]'s)
+        raise InputError(f"unknown key '{unknown_top[0]}' (known: curves, units)",
+                         _key_location(text, where, unknown_top[0], 0))
     raw_curves = data["curves"] if "curves" in data else [data]
     if not isinstance(raw_curves, list) or not raw_curves:
         raise InputError("'curves' must be a non-empty list of curve objects",
@@ -81,9 +108,14 @@ def read_json_curves(path: Path, text: str) -> tuple[str, list[tuple[NurbsCurve,
                 raise InputError(f"curves[{i}]: missing '{key}'",
                                  _key_location(text, where, "degree" if key != "degree"
                                                else "knots", i))
+        for key in ("knots", "control_points", "weights"):
+            wrong = _not_number(raw[key], key) if raw.get(key) is not None else None
+            if wrong is not None:
+                raise InputError(f"curves[{i}]: {wrong}", _key_location(text, where, key, i))
         try:
             curve = NurbsCurve.build(raw["degree"], raw["knots"], raw["control_points"],
-                                     raw.get("weights"), str(raw.get("name", f"curve{i}")))
+                                     raw.get("weights"),
+                                     comment_safe(str(raw.get("name", f"curve{i}"))))
         except CurveError as exc:
             field = _field_of(exc.message)
             raise CurveError(f"curves[{i}]: {exc.message}",
@@ -109,6 +141,14 @@ def _field_of(message: str) -> str:
     return "control_points"
 
 
+def comment_safe(text: str) -> str:
+    """`text` fit to sit inside a G-code comment "( ... )": parentheses become brackets (one ")"
+    would end the comment early, and nurbsfeed itself refuses an unclosed "("), and line breaks,
+    other control characters and anything unprintable (undecodable bytes) become "?"."""
+    return "".join("[" if ch == "(" else "]" if ch == ")" else ch if ch.isprintable() else "?"
+                   for ch in text)
+
+
 def _fmt(value: float, decimals: int) -> str:
     text = f"{value:.{decimals}f}".rstrip("0")
     if text in ("-0.", "-"):
@@ -118,8 +158,9 @@ def _fmt(value: float, decimals: int) -> str:
 
 def json_program(path: Path, text: str, decimals: int = 4) -> Iterator[ProgramItem]:
     """The JSON file as a program stream: header lines, then per curve a G0 and the curve."""
+    text = text.removeprefix("\ufeff")
     units, curves = read_json_curves(path, text)
-    yield PassThrough(f"(nurbsfeed: {len(curves)} curve(s) from {path.name})\n")
+    yield PassThrough(f"(nurbsfeed: {len(curves)} curve(s) from {comment_safe(path.name)})\n")
     yield PassThrough(("G21" if units == "mm" else "G20") + " G90\n")
     for i, (curve, feed_mm_s) in enumerate(curves):
         start = curve.points[0]

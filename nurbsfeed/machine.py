@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -117,6 +118,30 @@ def builtin_profiles() -> list[str]:
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".yaml"))
 
 
+class _ProfileLoader(yaml.SafeLoader):
+    """PyYAML's safe loader with two YAML 1.2 rules: `1e9` and `1.0e9` are floats (YAML 1.1's
+    resolver wants a point and a signed exponent, and reads them as strings), and a key given
+    twice in one mapping is an error (PyYAML keeps the last silently)."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
+        seen: set[Any] = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            if not isinstance(key, (str, int, float, bool)):
+                continue  # an unhashable key: SafeLoader's own message
+            if key in seen:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"key '{key}' appears twice", key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
+_ProfileLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."))
+
+
 def _key_places(text: str, where: str) -> dict[str, Location]:
     """Line and column of each top-level key, from the YAML node tree."""
     node = yaml.compose(text)
@@ -144,7 +169,7 @@ def load_machine(name_or_path: str, overrides: Mapping[str, Any] | None = None) 
         where = f"{name_or_path}.yaml"
         text = (resources.files("nurbsfeed.configs") / where).read_text(encoding="utf-8")
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=_ProfileLoader)  # a SafeLoader subclass
         places = _key_places(text, where)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)

@@ -25,7 +25,7 @@ from tests.bench.programs import fanuc_program
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLES = ROOT / "samples"
 BAD = Path(__file__).resolve().parent / "data" / "bad_gcode"
-PREAMBLE = "G17 G21 G90 G94\nG0 X0 Y0 Z0\n"
+PREAMBLE = "G17 G21 G90 G94\nG0 X0 Y0 Z0 F600\n"
 
 
 def source_lines(text: str) -> list[str]:
@@ -258,10 +258,9 @@ def test_fanuc_g91_control_points_are_relative_to_the_previous_one() -> None:
 
 def test_linuxcnc_g5_2_g91_points_are_relative_to_the_block_start() -> None:
     """interp_convert.cc find_ends adds the current position, which moves only at G5.3."""
-    block = only_curve("G21 G90 G0 X1 Y2 Z3\nG91\nG5.2\nX1 Y1 P1\nX2 Y0 P1\nG5.3\n")
+    block = only_curve("G21 G90 G0 X1 Y2 Z3\nG91\nG5.2\nX1 Y1 P1\nX2 Y0 P1 F60\nG5.3\n")
     assert_curve(block, 2, [0, 0, 0, 1, 1, 1], [[1, 2, 3], [2, 3, 3], [3, 2, 3]])
-    assert block.incremental and block.feed_word_after is None
-    assert np.isinf(block.feed_mm_s).all()  # no F was ever programmed
+    assert block.incremental and block.feed_word_after == "F60."
 
 
 @pytest.mark.parametrize("plane, words, points", [
@@ -269,7 +268,7 @@ def test_linuxcnc_g5_2_g91_points_are_relative_to_the_block_start() -> None:
     ("G19", ["Y1 Z1", "Y2 Z0"], [[1, 2, 3], [1, 1, 1], [1, 2, 0]]),
 ])
 def test_g5_2_plane_holds_the_third_axis(plane: str, words: list, points: list) -> None:
-    text = f"G21 G90 G0 X1 Y2 Z3\n{plane}\nG5.2\n{words[0]} P1\n{words[1]} P1\nG5.3\n"
+    text = f"G21 G90 G0 X1 Y2 Z3 F600\n{plane}\nG5.2\n{words[0]} P1\n{words[1]} P1\nG5.3\n"
     assert_curve(only_curve(text), 2, [0, 0, 0, 1, 1, 1], points)
 
 
@@ -321,9 +320,9 @@ def test_unknown_position_skips_the_check_for_programmed_axes() -> None:
     text = ("G21 G90 G0 X0 Y0 Z5\nG91 G28 Z0\nG90\n"
             "G06.2 P3 K0 X0 Y0 Z-1 F900\nK0 X10 Y10\nK0 X20 Y0\nK1\nK1\nK1\n")
     assert only_curve(text).curve.points[0].tolist() == [0, 0, -1]
-    omitted = text.replace("Z-1 F900", "F900")
+    moved_later = text.replace("Z-1 F900", "F900").replace("K0 X20 Y0", "K0 X20 Y0 Z-1")
     with pytest.raises(InputError, match=r"^t.nc:4:1: Z is unknown here \(after G28 on line 2\)"):
-        read(omitted)
+        read(moved_later)
 
 
 @pytest.mark.parametrize("before", [
@@ -348,11 +347,11 @@ def test_position_tracking(before: str) -> None:
     ("G0 X1 Y0 Z0\nG31 Z-10 F100\n", "after G31 on line 3"),
     ("G0 X1 Y0 Z0\nM98 P100\n", "after M98 on line 3"),
     ("G0 X1 Y0 Z0\nG200 Z4\n", "after G200 on line 3, a G code nurbsfeed does not interpret"),
-    ("G0 X1 Y0 Z0\nG5.2\nX2 Y1 P1\nX1 Y0 P1\nG5.3\nZ1\n",
+    ("G0 X1 Y0 Z0 F600\nG5.2\nX2 Y1 P1\nX1 Y0 P1\nG5.3\nZ1\n",
      "after axis words with no motion mode in effect on line 7"),
 ])
 def test_what_loses_z(before: str, lost: str) -> None:
-    text = "G21 G90\n" + before + "G06.2 P3 K0 X1 Y0 F40\nK0 X2 Y1\nK0 X3 Y0\nK1\nK1\nK1\n"
+    text = "G21 G90\n" + before + "G06.2 P3 K0 X1 Y0 F40\nK0 X2 Y1\nK0 X3 Y0 Z1\nK1\nK1\nK1\n"
     with pytest.raises(InputError, match=rf"Z is unknown here \({re.escape(lost)}\)"):
         read(text)
 
@@ -373,10 +372,11 @@ def test_feed_in_force_before_the_block_holds_until_a_control_point_changes_it()
     assert block.feed_word_after == "F300."
 
 
-def test_comment_lines_inside_a_block_are_part_of_it() -> None:
+def test_comment_lines_inside_a_block_are_kept_before_it() -> None:
     text = PREAMBLE + "G06.2 P3 K0 X0 Y0 F500\n(mid-curve note)\n\nK0 X1 Y1\nK0 X2 Y0\nK1\nK1\nK1\n"
     items = read(text)
-    assert [type(item).__name__ for item in items] == ["PassThrough"] * 2 + ["CurveBlock"]
+    assert [type(item).__name__ for item in items] == ["PassThrough"] * 3 + ["CurveBlock"]
+    assert items[2] == PassThrough("(mid-curve note)\n\n")
 
 
 def test_the_reader_streams() -> None:

@@ -24,7 +24,10 @@ block arrives; the message names the alarm a controller would raise.
   coarser of the two written values, and never closer than the controller's own resolution
   (modal.tolerance). Where the current position is unknown
   (modal.py lists what loses it), a programmed axis is taken as the start and not checked; an
-  omitted axis is an error, since its value is needed.
+  omitted axis is held where it is, never written, and stays unknown after the curve (a planar
+  curve needs no third axis), unless a later control point moves it: that is an error, reported
+  once the curve is read so that its lines' own errors (a decreasing knot, a bad weight) come
+  first.
 - G91: each control point is relative to the previous one, the first relative to the current
   position, so it must be zero travel ("G06.2 X0 Y0 Z0 K_", 15i manual). Knots and weights are
   always absolute.
@@ -106,6 +109,10 @@ class NurbsCurveReader:
         self.changes: list[FeedChange] = []
         self.n_closing = 0  # knot-only blocks read so far
         self.order = DEFAULT_ORDER
+        # axes omitted on the first block while the position is unknown: held at 0 internally,
+        # never written; the word of a later control point that moves one (an error at finish)
+        self.unknown: set[str] = set()
+        self.unknown_moved: Word | None = None
         self._open(first)
 
     # ---- the first block -----------------------------------------------------------------------
@@ -144,7 +151,7 @@ class NurbsCurveReader:
         and blocks: "K_ X_ Y_ Z_ [R_]", one space apart, before the knot-only blocks. Reads it
         exactly as `take` would read its block (same checks, same errors) and returns True;
         returns False, having read nothing, for any other line or a weight `take` rejects."""
-        if self.n_closing:
+        if self.n_closing or self.unknown:
             return False
         match = _POINT_LINE.fullmatch(line_text)
         if match is None:
@@ -185,7 +192,7 @@ class NurbsCurveReader:
         read without a check of `_knot`: past the clamped start, knots increasing, weights
         positive; the first line the scan refuses is left to `take_line` or `take`.
         Returns (lines read, text position after them); (0, pos) when it read none."""
-        if self.n_closing or len(self.knots) < self.order:
+        if self.n_closing or self.unknown or len(self.knots) < self.order:
             return 0, pos
         n, last_start, end = scan_point_lines(program.codes, pos, self.knots[-1], program.values)
         if not n:
@@ -301,13 +308,17 @@ class NurbsCurveReader:
             previous = self.points[-1][AXES.index(axis)]
             if word is None:
                 return previous
+            if axis in self.unknown and self.unknown_moved is None:
+                self.unknown_moved = word
             self.decimals[axis] = word.decimals
             return previous + word.value if state.incremental else word.value
         current = state.pos[axis]
         if word is None:
             self.decimals[axis] = current.decimals
-            return state.known(axis, self.start, f"program {axis} in the curve's first block "
-                                                 "(omitted axes keep the current position)")
+            if current.value is None:  # fine while no control point moves it (finish)
+                self.unknown.add(axis)
+                return 0.0
+            return current.value
         value = word.value
         if state.incremental:
             value += state.known(axis, word, "a G91 first control point is relative to it")
@@ -379,6 +390,10 @@ class NurbsCurveReader:
                           self.location)
 
     def finish(self) -> FinishedCurve:
+        if self.unknown_moved is not None:
+            axis = self.unknown_moved.letter
+            self.state.known(axis, self.start, f"program {axis} in the curve's first block "
+                                               "(omitted axes keep the current position)")
         self._flush_decimal_texts()
         check_coordinates(self.points, self.point_lines, self.location)
         curve = build_curve(self.order - 1, self.knots, self.points, self.weights, self.name,
@@ -387,4 +402,6 @@ class NurbsCurveReader:
                                        self.location)
         end = {axis: AxisPos(self.points[-1][i], self.decimals.get(axis))
                for i, axis in enumerate(AXES)}
+        for axis in self.unknown:  # never moved, never written: still unknown
+            end[axis] = self.state.pos[axis]
         return FinishedCurve(curve, self.location, feed_u, feed_mm_s, end, self.feed, G6_2)

@@ -22,7 +22,9 @@ this reader follows the interpreter, since that is what a machine does:
 - G5.3 without G5.2 is an error; so are fewer control points (counting the start point) than the
   order ("You must specify a number of control points at least equal to the order L = %d").
 - The plane is G17 (X Y), G18 (Z X) or G19 (Y Z), as extended in LinuxCNC pull request #2229; the
-  third axis holds its current value, and a word for it is an error.
+  third axis holds its current value, and a word for it is an error. The held axis may be unknown
+  (the reference's own example never sets Z): it is never written and stays unknown after the
+  block. The two plane axes must be known (the curve starts there), reported at G5.3.
 - Under G91 each control point is relative to the position *before the block*: the interpreter's
   `find_ends` adds the current position, which it updates only at G5.3.
 - The feed is the F in force at G5.3 (an F on any line of the block sets it). G5.3 ends the
@@ -75,9 +77,13 @@ class G52BlockReader:
                              f"{code_name('G', state.plane)}", self.location)
         self.plane_axes = PLANES[state.plane]
         self.held = next(axis for axis in AXES if axis not in self.plane_axes)
-        self.origin = {axis: state.known(axis, start, "G5.2 starts the curve at the current "
-                                                      "position; move there with G0 or G1 first")
+        # The held axis is never written (its moves stay constant, MoveWriter writes changed
+        # axes only), so an unknown one is held at 0 internally and stays unknown after the
+        # block. An unknown plane axis is reported at G5.3, once every line's own checks ran.
+        self.origin = {axis: 0.0 if state.pos[axis].value is None else state.pos[axis].value
                        for axis in AXES}
+        self.unknown_start = next((axis for axis in self.plane_axes
+                                   if state.pos[axis].value is None), None)
         self.points: list[tuple[float, float, float]] = [
             (self.origin["X"], self.origin["Y"], self.origin["Z"])]
         self.point_lines = [start.line]  # the line of each control point, for messages
@@ -99,6 +105,10 @@ class G52BlockReader:
         feed = block.first("F")
         if feed is not None:
             self.state.apply_feed(feed)
+        if self.unknown_start is not None:
+            self.state.known(self.unknown_start, self.start, "G5.2 starts the curve at the "
+                                                             "current position; move there with "
+                                                             "G0 or G1 first")
         if len(self.points) < self.order:
             raise CurveError(f"{count(len(self.points), 'control point')} fewer than the order "
                              f"L{self.order}, counting the start point: LinuxCNC needs at least "
@@ -176,5 +186,6 @@ class G52BlockReader:
         feed_u, feed_mm_s = feed_steps(curve, feed, [], self.state, self.location)
         end = {axis: AxisPos(self.points[-1][i], self.decimals[axis])
                for i, axis in enumerate(AXES)}
+        end[self.held] = self.state.pos[self.held]  # held, known or not
         return FinishedCurve(curve, self.location, feed_u, feed_mm_s, end, feed, None)
 

@@ -140,6 +140,9 @@ class ModalState:
     cycle: int | None = None  # canned cycle code while one is active
     pos: dict[str, AxisPos] = field(default_factory=lambda: {axis: AxisPos(None)
                                                                for axis in AXES})
+    # the last G code this reader does not know, until a motion code follows it: a G5.3 with no
+    # G5.2 before it blames it as a likely typo (G2.2 for G5.2), at its own line
+    unknown_g: Word | None = None
 
     def where(self, word: Word) -> Location:
         return Location(self.path, word.line, word.col)
@@ -220,6 +223,10 @@ class ModalState:
         if motions:
             self.motion = motions[0].code
             self.cycle = None
+            self.unknown_g = None
+        unknown = [word for code, word in g.items() if code not in KNOWN_G]
+        if unknown:
+            self.unknown_g = unknown[-1]
         self._move(block, g, m, axes)
 
     def _set_units(self, units: str) -> None:

@@ -85,8 +85,13 @@ def check_block(block: Block, state: ModalState, allowed_letters: str, allowed_g
     """
     check_no_assignments(block, state)
     seen: set[str] = set()
+    codes: set[tuple[str, int]] = set()
     for word in block.words:
-        if word.letter in seen and word.letter not in "GM":
+        if word.letter in "GM":
+            if (word.letter, word.code) in codes:
+                raise InputError(f"{word.name} appears twice in one block", state.where(word))
+            codes.add((word.letter, word.code))
+        elif word.letter in seen:
             raise InputError(f"{word.letter} appears twice in one block", state.where(word))
         seen.add(word.letter)
     allowed_g = set(allowed_g)
@@ -104,11 +109,16 @@ def feed_steps(curve: NurbsCurve, initial: FeedWord | None, changes: list[FeedCh
     The feed in force when the block starts holds from u_min; each change holds from its knot on
     (the input's u, mapped as the curve maps its knots; clamped to u_min; a change at or after
     u_max only sets the modal F after the curve). A feed of zero is an error (LinuxCNC: "Cannot
-    make a NURBS with 0 feedrate"; Fanuc alarm PS0011).
+    make a NURBS with 0 feedrate"; Fanuc alarm PS0011), and so is no F at all at the curve's
+    start: a controller starts a program at F0, and the curve must not silently run at the
+    machine's maximum (a JSON curve without "feed" does, by design §4).
     """
     u_min, u_max = curve.u_min, curve.u_max
     if initial is not None and initial.per_min == 0.0 and not (changes and changes[0].u <= u_min):
         raise InputError("the feed in force is F0: a NURBS curve needs a feed above zero", start)
+    if initial is None and not (changes and changes[0].u <= u_min):
+        raise InputError("no feed is in force: program an F (e.g. F600) before or in the NURBS "
+                         "block; without one the curve would run at the machine's maximum", start)
     starts = [u_min]
     values = [math.inf if initial is None else initial.per_min / 60.0]
     for change in changes:

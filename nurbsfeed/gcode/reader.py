@@ -6,7 +6,9 @@ result, and `take_run` reads a whole run of such lines at once in compiled code,
 `take_knot_line` reads a plain closing "K_" line the same way)
 -> if a NURBS block is open, its reader
 (`fanuc.NurbsCurveReader` or `linuxcnc.G52BlockReader`) takes the block, and the CurveBlock is
-yielded when the block completes; otherwise `_start` decides whether the block opens a NURBS
+yielded when the block completes, after the comment, blank and N-only lines read inside it (kept,
+in order, as one PassThrough: they come out right before the block's moves); a `%` inside a block
+is an error; otherwise `_start` decides whether the block opens a NURBS
 block, and if not `modal.ModalState.apply` executes it and the line passes through unchanged.
 Parameter assignments take effect after their line.
 
@@ -25,7 +27,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from pathlib import Path
 
-from nurbsfeed.errors import InputError
+from nurbsfeed.errors import InputError, Location
 from nurbsfeed.gcode.fanuc import NurbsCurveReader
 from nurbsfeed.gcode.linuxcnc import G52BlockReader
 from nurbsfeed.gcode.modal import AXES, G5_2, G5_3, G6_2, NO_POSITION_EFFECT, ModalState
@@ -35,14 +37,17 @@ from nurbsfeed.gcode.tokenizer import Block, Param, tokenize_line
 from nurbsfeed.program import CurveBlock, PassThrough, ProgramItem
 
 DIALECTS = ("auto", "fanuc", "linuxcnc")
+BOM = "\ufeff"
 
 
 def read_gcode(path: Path, text: str, dialect: str = "auto") -> Iterator[ProgramItem]:
     """The program in `text` (read from `path`) as items in file order, streamed.
 
     `text` keeps its line endings; the PassThrough texts and the lines the CurveBlocks stand for
-    concatenate to it exactly. Raises InputError (or CurveError) at FILE:LINE:COL of the word at
-    fault, when the stream reaches it; an unknown dialect is refused at once.
+    concatenate to it exactly, except that the comment, blank and N-only lines inside a NURBS
+    block come (in order) right before its CurveBlock, and a BOM comes first on its own.
+    Raises InputError (or CurveError) at FILE:LINE:COL of the word at fault, when the stream
+    reaches it; an unknown dialect is refused at once.
     """
     if dialect not in DIALECTS:
         raise InputError(f"unknown G-code dialect '{dialect}' (use auto, fanuc or linuxcnc)")
@@ -60,8 +65,15 @@ class _Reader:
         self.open: NurbsCurveReader | G52BlockReader | None = None
         self.eol = "\n"
         self.last_curve: NurbsCurveReader | None = None  # the modal G6.2 curve's rules
+        self.kept: list[str] = []  # the inert lines inside the open block, yielded before it
 
     def items(self, text: str) -> Iterator[ProgramItem]:
+        if text.startswith(BOM):  # kept byte for byte, and not part of the first line
+            yield PassThrough(BOM)
+            text = text[len(BOM):]
+        # "\n" ends a line (a lone "\r" inside one is a space), except in a file whose lines all
+        # end in "\r" (classic Mac OS): read as one line, it would convert nothing
+        newline = "\r" if "\n" not in text and "\r" in text else "\n"
         program = ProgramCodes.of(text)
         # Once a scan reads no line, the next waits for a line take_line reads: where a program
         # writes its points in another form (N words, F on every line), a scan per line would
@@ -78,7 +90,7 @@ class _Reader:
                     pos = after
                     continue
                 scan = False
-            end = text.find("\n", pos) + 1 or len(text)  # only "\n" ends a line
+            end = text.find(newline, pos) + 1 or len(text)
             line_text = text[pos:end]
             pos = end
             if isinstance(self.open, NurbsCurveReader):  # plain lines, read straight from text
@@ -88,25 +100,41 @@ class _Reader:
                 closed = self.open.take_knot_line(line_text, line)
                 if closed is not None:  # a closing knot
                     if closed:
-                        yield self._curve_block(self.open.finish())
-                        self.open = None
+                        yield from self._close()
                     continue
             block = tokenize_line(line_text, line, self.path, self.params)
             if self.open is not None:
-                if self.open.take(block):
-                    yield self._curve_block(self.open.finish())
-                    self.open = None
+                if block.delimiter:
+                    body = line_text.rstrip("\r\n")
+                    raise InputError("'%' (start or end of the program) inside a NURBS block: "
+                                     "the block has not ended here",
+                                     Location(self.path, line,
+                                              len(body) - len(body.lstrip(" \t\r")) + 1))
+                if block.is_inert:  # a comment, blank or N-only line: kept, in order
+                    self.kept.append(line_text)
+                elif self.open.take(block):
+                    yield from self._close()
             else:
                 self.open = self._start(block)
                 if self.open is None:
                     self.state.apply(block)
                     yield PassThrough(line_text)
                 else:
-                    self.eol = block.eol or "\n"
+                    self.eol = block.eol or newline
             for assignment in block.assignments:
                 self.params[assignment.number] = assignment.param
         if self.open is not None:
             raise self.open.unfinished()
+
+    def _close(self) -> Iterator[ProgramItem]:
+        """The kept lines of the block just completed, then its CurveBlock."""
+        assert self.open is not None, "called when a block completes"
+        finished = self.open.finish()
+        if self.kept:
+            yield PassThrough("".join(self.kept))
+            self.kept = []
+        yield self._curve_block(finished)
+        self.open = None
 
     def _start(self, block: Block) -> NurbsCurveReader | G52BlockReader | None:
         """The reader of the NURBS block this block opens, or None for an ordinary block."""
@@ -124,6 +152,11 @@ class _Reader:
                                  "linuxcnc (or auto)", state.where(g[G5_2]))
             return G52BlockReader(block, state, g[G5_2])
         if G5_3 in g:
+            typo = state.unknown_g
+            if typo is not None:
+                raise InputError(f"{typo.name} is a G code nurbsfeed does not know, and the G5.3 "
+                                 f"on line {block.line} closes a NURBS block nothing opened: "
+                                 "write G5.2 to open it", state.where(typo))
             raise InputError("G5.3 without G5.2 first (LinuxCNC: Cannot use G5.3 without G5.2 "
                              "first)", state.where(g[G5_3]))
         previous = self.last_curve

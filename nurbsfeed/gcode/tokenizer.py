@@ -6,7 +6,9 @@ The lexical rules, shared by Fanuc and LinuxCNC programs:
   letter, the sign and the digits; digits themselves are contiguous). `N`, `O`, `G`, `M`, `F` are
   words like any other. A number without a decimal point means its face value (`X10` is 10.0, the
   "calculator-type" input of LinuxCNC and of Fanuc with parameter DPI set); the digits written
-  after the point are kept as `Word.decimals`, the precision the program was written to.
+  after the point are kept as `Word.decimals`, the precision the program was written to. Digits
+  are ASCII 0-9: full-width or Arabic-Indic digits (which a regex digit class and float() accept)
+  are refused with their own message.
 - Comments: `( ... )` anywhere, `;` to the end of the line.
 - `%` alone at the start of a line is the program delimiter; the line has no words.
 - `/` (optionally `/1`..`/9`, Fanuc optional block skip) as the first character: block delete.
@@ -32,19 +34,20 @@ from typing import NamedTuple
 from nurbsfeed.errors import InputError, Location
 
 _SPACE = "[ \t\r]"  # the spaces between words (a lone CR inside a line is one)
-_NUMBER = re.compile(rf"[+-]?{_SPACE}*(?:\d+(?:\.\d*)?|\.\d+)")
-_PARAM_REF = re.compile(rf"([+-]?){_SPACE}*#{_SPACE}*(\d+)")
-_ASSIGN = re.compile(rf"#{_SPACE}*(\d+){_SPACE}*=")
+_DIGITS = r"(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)"  # ASCII only: \d would take any script's digits
+_NUMBER = re.compile(rf"[+-]?{_SPACE}*{_DIGITS}")
+_PARAM_REF = re.compile(rf"([+-]?){_SPACE}*#{_SPACE}*([0-9]+)")
+_ASSIGN = re.compile(rf"#{_SPACE}*([0-9]+){_SPACE}*=")
 _LETTER_RUN = re.compile(r"[A-Za-z]{2,}")
 _FUNCTION = re.compile(rf"([A-Za-z]{{2,}}){_SPACE}*\[")
 # The fast paths: a line of words separated by single spaces (what posts write), then a line of
 # plain words and comments only (no %, /, #, [ or statements).
-PLAIN_NUMBER = r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)"  # a number written without spaces
+PLAIN_NUMBER = rf"[+-]?{_DIGITS}"  # a number written without spaces
 _WORD = rf"[A-Za-z]{PLAIN_NUMBER}"
 _SIMPLE_LINE = re.compile(rf"{_WORD}(?: {_WORD})*")
-_PLAIN_LINE = re.compile(rf"{_SPACE}*(?:(?:[A-Za-z]{_SPACE}*[+-]?{_SPACE}*(?:\d+(?:\.\d*)?|\.\d+)"
+_PLAIN_LINE = re.compile(rf"{_SPACE}*(?:(?:[A-Za-z]{_SPACE}*[+-]?{_SPACE}*{_DIGITS}"
                          rf"|\([^)]*\)){_SPACE}*)*(?:;.*)?")
-_PLAIN_WORD = re.compile(rf"([A-Za-z]){_SPACE}*([+-]?){_SPACE}*(\d+(?:\.\d*)?|\.\d+)|\([^)]*\)|;.*")
+_PLAIN_WORD = re.compile(rf"([A-Za-z]){_SPACE}*([+-]?){_SPACE}*({_DIGITS})|\([^)]*\)|;.*")
 
 # Letter runs that open a macro / O-word statement (Fanuc custom macro B, LinuxCNC O-codes).
 KEYWORDS = frozenset({
@@ -207,6 +210,9 @@ class _Scanner:
             return sign * param.value, f"{ref.group(1)}#{number}", param.decimals
         if self.peek() == "#":
             raise self.error(BAD_PARAMETER)
+        if self.peek().isdigit() and not self.peek().isascii():
+            raise self.error(f"'{printable(self.peek())}' is not one of the digits 0-9 "
+                             "(full-width and other scripts' digits are not G-code numbers)")
         literal = _NUMBER.match(self.body, self.pos)
         if not literal:
             raise self.error(f"{owner} has no number after it (found {self.snippet()}); write "
@@ -300,7 +306,7 @@ def _scan_line(body: str, eol: str, line: int, path: str,
     if scan.peek() == "/":
         block_delete = True
         scan.pos += 1
-        if scan.peek().isdigit():
+        if scan.peek() and scan.peek() in "0123456789":
             scan.pos += 1
     words: list[Word] = []
     assignments: list[Assignment] = []
@@ -352,7 +358,10 @@ def _scan_line(body: str, eol: str, line: int, path: str,
                              "number")
         elif char == "/":
             raise scan.error("'/' (block delete) must be the first character of the line")
-        elif char.isdigit() or char in "+-.":
+        elif char.isdigit() and not char.isascii():
+            raise scan.error(f"'{printable(char)}' is not one of the digits 0-9 (full-width and "
+                             "other scripts' digits are not G-code numbers)")
+        elif char in "0123456789+-.":
             stray = _NUMBER.match(body, start)
             shown = re.sub(_SPACE, "", stray.group()) if stray else char
             raise scan.error(f"'{shown}' has no letter in front of it (a word is a letter and a "

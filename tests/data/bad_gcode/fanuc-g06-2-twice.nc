@@ -1,0 +1,13 @@
+; expect: 6:7: G06.2 appears twice in one block
+%
+O2000 (BAD INPUT CASE)
+G17 G21 G40 G49 G80 G90 G94
+G0 X0. Y0. Z0.
+G06.2 G06.2 P3 K0. X0. Y0. F2000.
+K0. X10. Y10.
+K0. X20. Y0.
+K1.
+K1.
+K1.
+M30
+%
