@@ -160,7 +160,8 @@ def json_program(path: Path, text: str, decimals: int = 4) -> Iterator[ProgramIt
     """The JSON file as a program stream: header lines, then per curve a G0 and the curve."""
     text = text.removeprefix("\ufeff")
     units, curves = read_json_curves(path, text)
-    yield PassThrough(f"(nurbsfeed: {len(curves)} curve(s) from {comment_safe(path.name)})\n")
+    count = f"{len(curves)} curve" + ("" if len(curves) == 1 else "s")  # no "(s)": a comment
+    yield PassThrough(f"(nurbsfeed: {count} from {comment_safe(path.name)})\n")  # nests none
     yield PassThrough(("G21" if units == "mm" else "G20") + " G90\n")
     for i, (curve, feed_mm_s) in enumerate(curves):
         start = curve.points[0]

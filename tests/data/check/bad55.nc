@@ -1,4 +1,4 @@
-(nurbsfeed: 1 curve(s) from bad55.json)
+(nurbsfeed: 1 curve from bad55.json)
 G21 G90
 G0 X19.0423 Y11.3461 Z0.
 (nurbsfeed: curve 0 curve0, 2 points, period 1 ms, rk2c, length 42.181 mm, planned cycle 0.001 s)

@@ -1,4 +1,4 @@
-(nurbsfeed: 1 curve(s) from corner.json)
+(nurbsfeed: 1 curve from corner.json)
 G21 G90
 G0 X0. Y0. Z0.
 (nurbsfeed: curve 0 corner, 491 points, period 1 ms, rk2c, length 40.000 mm, planned cycle 0.490 s)

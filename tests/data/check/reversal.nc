@@ -1,4 +1,4 @@
-(nurbsfeed: 1 curve(s) from reversal.json)
+(nurbsfeed: 1 curve from reversal.json)
 G21 G90
 G0 X0. Y0. Z0.
 (nurbsfeed: curve 0 rev, 291 points, period 1 ms, rk2c, length 20.000 mm, planned cycle 0.290 s)
