@@ -18,8 +18,9 @@ def pytest_addoption(parser: pytest.Parser) -> None:
                      help="Rewrite the golden output files instead of comparing with them.")
 
 
-def load_curve(name: str) -> NurbsCurve:
-    raw = json.loads((SAMPLES / f"{name}.json").read_text())["curves"][0]
+def load_curve(name: str, folder: Path = SAMPLES) -> NurbsCurve:
+    """The first curve of folder/name.json."""
+    raw = json.loads((folder / f"{name}.json").read_text())["curves"][0]
     return NurbsCurve.build(raw["degree"], raw["knots"], raw["control_points"],
                             raw.get("weights"), raw.get("name", name))
 

@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tests.gcode_parse import moves
+
 FD_REL = 0.02  # finite differences at one period: within 2 % of the continuous quantity
 
 
@@ -47,8 +49,6 @@ def written_moves(text: str, start: np.ndarray, period_s: float,
     """The G1 moves of one replaced block in `text` (our own output: comments, G90/G91 and F
     restores skipped): written points (M, 3) and the period index each arrives at (M,), from
     the move lengths and F words (a move of length d at F lasts d / (F / 60))."""
-    from tests.gcode_parse import moves
-
     points, feeds, _ = moves(text, start)
     previous = np.vstack([np.asarray(start, dtype=float)[None, :], points[:-1]])
     duration_s = np.linalg.norm(points - previous, axis=1) / (feeds / 60.0)

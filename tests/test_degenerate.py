@@ -11,7 +11,6 @@ the written program arriving where and when the plan does.
 from __future__ import annotations
 
 import io
-import json
 import os
 from pathlib import Path
 
@@ -29,6 +28,7 @@ from nurbsfeed.interpolate import interpolate
 from nurbsfeed.machine import load_machine
 from nurbsfeed.planning.limits import Limits
 from nurbsfeed.planning.planner import KIND_CORNER, KIND_CUSP, KIND_NAMES, plan_curve
+from tests.conftest import load_curve
 from tests.motion_check import FD_REL, motion, written_moves
 
 CASES = Path(__file__).parent / "data" / "degenerate"
@@ -41,9 +41,7 @@ EXAMPLES = int(os.environ.get("NURBSFEED_PROPERTY_EXAMPLES", "300"))
 
 
 def load(name: str) -> NurbsCurve:
-    raw = json.loads((CASES / f"{name}.json").read_text())["curves"][0]
-    return NurbsCurve.build(raw["degree"], raw["knots"], raw["control_points"],
-                            raw.get("weights"), name)
+    return load_curve(name, CASES)
 
 
 # file -> the stops the plan must find, as (u, kind), and the length of the path

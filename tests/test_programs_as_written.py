@@ -16,12 +16,16 @@ from nurbsfeed.program import CurveBlock, PassThrough
 from tests.conftest import SAMPLES
 
 
-def convert(source: Path, tmp_path: Path) -> str:
-    target = tmp_path / "out.nc"
+def convert_to(source: Path, target: Path) -> Path:
+    """`nurbsfeed convert SOURCE -o TARGET`, which must succeed."""
     result = CliRunner().invoke(main, ["convert", str(source), "-o", str(target)],
                                 catch_exceptions=False)
     assert result.exit_code == 0, result.stderr
-    return target.read_text()
+    return target
+
+
+def convert(source: Path, tmp_path: Path) -> str:
+    return convert_to(source, tmp_path / "out.nc").read_text()
 
 
 def read(text: str) -> list:
@@ -141,11 +145,7 @@ def test_json_values_of_the_wrong_type_and_unknown_keys_are_refused(
 def convert_bytes(tmp_path: Path, data: bytes, name: str = "in.ngc") -> bytes:
     source = tmp_path / name
     source.write_bytes(data)
-    target = tmp_path / "out.nc"
-    result = CliRunner().invoke(main, ["convert", str(source), "-o", str(target)],
-                                catch_exceptions=False)
-    assert result.exit_code == 0, result.stderr
-    return target.read_bytes()
+    return convert_to(source, tmp_path / "out.nc").read_bytes()
 
 
 def test_a_utf8_bom_is_accepted_and_kept(tmp_path: Path) -> None:
@@ -206,10 +206,6 @@ def test_a_json_file_name_cannot_break_or_inject_into_the_header(tmp_path: Path,
 def test_a_converted_json_program_reads_back(tmp_path: Path) -> None:
     """nurbsfeed's own output of a JSON input is a G-code program nurbsfeed reads: all its
     lines pass through unchanged (the header once nested "(s)" inside its comment)."""
-    first = tmp_path / "first.nc"
-    again = tmp_path / "again.nc"
-    for source, target in ((SAMPLES / "butterfly.json", first), (first, again)):
-        result = CliRunner().invoke(main, ["convert", str(source), "-o", str(target)],
-                                    catch_exceptions=False)
-        assert result.exit_code == 0, result.output
+    first = convert_to(SAMPLES / "butterfly.json", tmp_path / "first.nc")
+    again = convert_to(first, tmp_path / "again.nc")
     assert again.read_bytes() == first.read_bytes()

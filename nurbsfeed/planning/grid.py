@@ -615,8 +615,8 @@ def _merge(knots, coef, degree, u, kappa, speed, pts, tan, extra, zero_speed):
 
 
 @jit
-def _refine_where_kappa_jumps(knots, coef, degree, u, kappa, speed, pts, tan, kappa_floor,
-                              zero_speed, floor_mm):
+def _refine_where_kappa_jumps_or_turns(knots, coef, degree, u, kappa, speed, pts, tan,
+                                       kappa_floor, zero_speed, floor_mm):
     """Step 4b: halve every interval across which kappa (above kappa_floor) changes by more than
     KAPPA_STEP_REL, up to REFINE_ROUNDS times, and every interval across which the tangent turns
     by more than its end nodes' kappa explains, up to TURN_REFINE_ROUNDS times.
@@ -710,6 +710,13 @@ def _unit_tangent(c, pts, tan, q):
 
 
 @jit
+def _holds_any(sorted_u, low, high):
+    """Whether sorted_u (K,) has a value in [low, high]."""
+    q = np.searchsorted(sorted_u, low)
+    return q < sorted_u.size and sorted_u[q] <= high
+
+
+@jit
 def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, floor_mm):
     """Steps 1-4: nodes u, kappa, |C'| (M,), refined peak parameters (P,), stops (Q,) with
     the cosine of their turn (Q,), and the mean |C'| over the samples (the arc length
@@ -739,15 +746,14 @@ def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, f
     # a peak whose bracket holds a stop adds nothing, the motion rests there anyway
     keep = np.ones(idx.size, dtype=np.bool_)
     for k in range(idx.size):
-        q = np.searchsorted(stop_u, u[idx[k] - 1])
-        keep[k] = not (q < stop_u.size and stop_u[q] <= u[idx[k] + 1])
+        keep[k] = not _holds_any(stop_u, u[idx[k] - 1], u[idx[k] + 1])
     peak_u = peak_u[keep]
     peak_u = np.sort(peak_u)
     extra = np.concatenate((peak_u, stop_u, extra_u))
     u, kappa, speed, pts, tan = _merge(knots, coef, degree, u, kappa, speed, pts, tan, extra,
                                        zero_speed)
     _fill_singular(kappa)
-    u, kappa, speed, pts, tan = _refine_where_kappa_jumps(
+    u, kappa, speed, pts, tan = _refine_where_kappa_jumps_or_turns(
         knots, coef, degree, u, kappa, speed, pts, tan, kappa_floor, zero_speed, floor_mm)
     # a spike of kappa narrower than the samples shows only in the refined grid: its maxima
     # at or above kappa_floor that no peak's bracket holds are peaks too (refined likewise)
@@ -758,11 +764,7 @@ def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, f
         low, high = u[idx[k] - 1], u[idx[k] + 1]
         if kappa[idx[k]] < kappa_floor:
             continue
-        q = np.searchsorted(peak_u, low)
-        if q < peak_u.size and peak_u[q] <= high:
-            continue
-        q = np.searchsorted(stop_u, low)
-        if q < stop_u.size and stop_u[q] <= high:
+        if _holds_any(peak_u, low, high) or _holds_any(stop_u, low, high):
             continue
         refined_u, refined_kappa = _refine_peak(knots, coef, degree, low, high, kappa_floor)
         more[n_more] = refined_u if refined_kappa > kappa[idx[k]] else u[idx[k]]

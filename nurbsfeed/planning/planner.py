@@ -252,7 +252,7 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
     seen = np.full((n_seg, 5), np.nan)
     v_nodes = np.zeros(s_mm.size)
     checked = np.empty(s_mm.size, dtype=np.int64)
-    from_rest = np.full(n_seg, -1, dtype=np.int64)
+    shoulder_at = np.full(n_seg, -1, dtype=np.int64)
     rounds = 0
     while True:
         free = np.maximum(length - hold_start - hold_end, 0.0)
@@ -322,10 +322,10 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
                 new_end = max(new_end, key_s[seg + 1] - last_down)
             lower_cap = mid or (up and v[seg] == 0.0) or (down and v[seg + 1] == 0.0)
             if up and (v[seg] == 0.0 or first_up - key_s[seg] > v[seg] * max_hold_s):
-                from_rest[seg] = last_up_node
+                shoulder_at[seg] = last_up_node
             elif down and (v[seg + 1] == 0.0
                            or key_s[seg + 1] - last_down > v[seg + 1] * max_hold_s):
-                from_rest[seg] = first_down_node
+                shoulder_at[seg] = first_down_node
             # A hold shortens what is left for the transitions; the next scan lowers the key
             # speeds until they fit. Holds that would meet leave no room: lower the cap instead.
             if new_start + new_end < length[seg] * (1.0 - HOLD_ROOM):
@@ -343,7 +343,7 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
         rounds += 1
         if not changed:
             break
-    return v, peak, t0, s0, v0, a0, jk, key_t, duration, v_nodes, rounds, from_rest
+    return v, peak, t0, s0, v0, a0, jk, key_t, duration, v_nodes, rounds, shoulder_at
 
 
 def _too_long(cycle_s: float, max_curve_time_s: float) -> str:
@@ -379,12 +379,12 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
             feed_nodes, kappa0, lim.feed_mm_s, shoulders)
         hold_start = np.zeros(len(key_node) - 1)
         hold_end = np.zeros(len(key_node) - 1)
-        v, peak, *pieces, key_t, duration, v_nodes, rounds, from_rest = _limit_rounds(
+        v, peak, *pieces, key_t, duration, v_nodes, rounds, shoulder_at = _limit_rounds(
             grid.s_mm, limit, key_node, nominal, cap, hold_start, hold_end, lim.acc_mm_s2,
             lim.jerk_mm_s3, HOLD_MAX_PERIODS * lim.period_s)
-        if not (from_rest >= 0).any():  # (the common case: setdiff1d costs ~50 us)
+        if not (shoulder_at >= 0).any():  # (the common case: setdiff1d costs ~50 us)
             break
-        new = np.setdiff1d(from_rest[from_rest >= 0], key_node)
+        new = np.setdiff1d(shoulder_at[shoulder_at >= 0], key_node)
         if new.size == 0 or shoulders.size >= SHOULDER_ROUNDS * max(1, key_node.size):
             break
         shoulders = np.union1d(shoulders, new)
