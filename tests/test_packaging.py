@@ -1,0 +1,24 @@
+"""What `pip install .` ships: every package of the source tree (the Quick start installs that way,
+not editable, so a package missing from pyproject's explicit list is missing for users)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+tomllib = pytest.importorskip("tomllib")  # Python >= 3.11
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def test_every_package_of_the_tree_is_listed_in_pyproject() -> None:
+    setup = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    listed = set(setup["packages"])
+    on_disk = {".".join(p.parent.relative_to(ROOT).parts)
+               for p in (ROOT / "nurbsfeed").rglob("__init__.py")}
+    assert on_disk - listed == set(), "packages pip install . would leave out"
+    # the profiles ship as a package of their own, from the top-level configs/ folder
+    assert setup["package-dir"]["nurbsfeed.configs"] == "configs"
+    assert (ROOT / "configs" / "__init__.py").is_file()
+    assert listed - on_disk == {"nurbsfeed.configs"}
