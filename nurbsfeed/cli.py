@@ -461,9 +461,10 @@ def plan(input: Path, dialect: str, **kwargs: Any) -> None:
     for item in read_program(input, text, dialect, machine.decimals):
         if not isinstance(item, CurveBlock):
             continue
+        item = item.in_mm()
         p = plan_block(item, machine)
         lim = p.limits
-        unit = item.units
+        unit = "mm"  # an inch program's too: every report is in the profile's unit
         click.echo(f"curve {index} {item.curve.name} ({item.location})")
         click.echo(f"  degree {item.curve.degree}, {item.curve.n_ctrl} control points, "
                    f"length {p.length_mm:.6f} {unit}")
@@ -576,8 +577,7 @@ def plot(input: Path, output: Path, curve_index: int, method: str, dialect: str,
     name = kwargs["machine"]
     block, plan, result = curve_run(input, machine_from(kwargs), method, dialect, curve_index)
     try:
-        plotting.plot_run(output, plan, result, run_series(block, plan, result), block.units,
-                          name)
+        plotting.plot_run(output, plan, result, run_series(block, plan, result), name)
     except OSError as exc:
         raise InputError(f"cannot write output ({exc.strerror or exc})",
                          Location(str(output))) from None

@@ -1,7 +1,9 @@
 """Machine profile: the kinematic limits and output settings, loaded and validated from YAML.
 
-Units live in the key names. "mm" means the program's length unit: an inch program converts the
-profile once with `in_program_units` and from then on every length in nurbsfeed is in inches.
+Units live in the key names and are what they say: mm and seconds, whatever the program's unit
+(an inch program's curves are converted to mm when they are read, `CurveBlock.in_mm`). Every key
+has a range (`RANGES`, README "Profile keys"): a value that passes is one the planner, the
+stepping loop and the writer compute with in finite numbers.
 """
 
 from __future__ import annotations
@@ -17,56 +19,52 @@ from typing import Any, Mapping
 import yaml
 
 from nurbsfeed.errors import Location, ProfileError
-
-MM_PER_INCH = 25.4
+from nurbsfeed.planning.limits import Limits
 
 
 @dataclass(frozen=True)
 class Machine:
-    """Limits of one machine (design §4). Every field is positive and finite."""
+    """One machine (design §4): its kinematic limits, in mm and s, and the output settings."""
 
-    period_s: float
-    max_feed_mm_s: float
-    chord_error_mm: float
-    max_acc_mm_s2: float  # tangential
-    max_jerk_mm_s3: float  # tangential
-    max_normal_acc_mm_s2: float
-    max_normal_jerk_mm_s3: float
+    limits: Limits
     # the longest planned cycle of one curve that is converted: a longer one is refused (a
     # mistyped feed or period would otherwise step for hours)
     max_curve_time_s: float = 3600.0
-    decimals: int = 4  # coordinate decimals in the output
+    decimals: int = 4  # coordinate decimals in mm programs (inch programs: one more)
     feed_decimals: int = 3  # F word decimals (more when F is small; see gcode.writer)
 
-    def in_program_units(self, units: str) -> "Machine":
-        """This profile with every length converted to `units` ("mm" or "in")."""
-        if units == "mm":
-            return self
-        scale = 1.0 / MM_PER_INCH
-        return dataclasses.replace(
-            self,
-            max_feed_mm_s=self.max_feed_mm_s * scale,
-            chord_error_mm=self.chord_error_mm * scale,
-            max_acc_mm_s2=self.max_acc_mm_s2 * scale,
-            max_jerk_mm_s3=self.max_jerk_mm_s3 * scale,
-            max_normal_acc_mm_s2=self.max_normal_acc_mm_s2 * scale,
-            max_normal_jerk_mm_s3=self.max_normal_jerk_mm_s3 * scale,
-            decimals=self.decimals + 1,
-        )
 
-
-FLOAT_KEYS = tuple(f.name for f in dataclasses.fields(Machine) if f.type == "float")
-# keys a profile must give; the others have the Machine's default
-REQUIRED_KEYS = tuple(f.name for f in dataclasses.fields(Machine)
-                      if f.default is dataclasses.MISSING)
+# profile key -> the Limits field it sets (the keys say "max", the fields are the limits)
+LIMIT_KEYS = {"period_s": "period_s", "max_feed_mm_s": "feed_mm_s",
+              "chord_error_mm": "chord_mm", "max_acc_mm_s2": "acc_mm_s2",
+              "max_jerk_mm_s3": "jerk_mm_s3", "max_normal_acc_mm_s2": "normal_acc_mm_s2",
+              "max_normal_jerk_mm_s3": "normal_jerk_mm_s3"}
+REQUIRED_KEYS = tuple(LIMIT_KEYS)  # the others have the Machine's default
+FLOAT_KEYS = REQUIRED_KEYS + ("max_curve_time_s",)
 INT_KEYS = ("decimals", "feed_decimals")
-INT_RANGES = {"decimals": (0, 8), "feed_decimals": (0, 6)}
+# The accepted values, ends included (README "Profile keys" says why each is physical).
+RANGES: dict[str, tuple[float, float]] = {
+    "period_s": (1e-6, 1.0),
+    "max_feed_mm_s": (1e-3, 1e5),
+    "chord_error_mm": (1e-6, 10.0),
+    "max_acc_mm_s2": (1e-3, 1e7),
+    "max_jerk_mm_s3": (1e-3, 1e10),
+    "max_normal_acc_mm_s2": (1e-3, 1e7),
+    "max_normal_jerk_mm_s3": (1e-3, 1e10),
+    "max_curve_time_s": (1e-3, 1e6),
+    "decimals": (0, 8),
+    "feed_decimals": (0, 6),
+}
+# A profile is a flat mapping of ten numbers: these bounds are far above any real one, and far
+# below what makes a YAML parser slow.
+MAX_PROFILE_BYTES = 1 << 20
+MAX_PROFILE_NODES = 1000
 
 
 def _check_value(key: str, value: Any) -> float | int:
     """One key's value, checked; ProfileError (without a place) when it is not valid."""
+    low, high = RANGES[key]
     if key in INT_KEYS:
-        low, high = INT_RANGES[key]
         if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
             raise ProfileError(f"'{key}' must be a whole number from {low} to {high}, "
                                f"not {value!r}")
@@ -75,6 +73,8 @@ def _check_value(key: str, value: Any) -> float | int:
         raise ProfileError(f"'{key}' must be a number, not {value!r}")
     if not math.isfinite(value) or value <= 0:
         raise ProfileError(f"'{key}' must be positive and finite, not {value!r}")
+    if not low <= value <= high:
+        raise ProfileError(f"'{key}' must be from {low:g} to {high:g}, not {value!r}")
     return float(value)
 
 
@@ -109,7 +109,8 @@ def machine_from_mapping(data: Any, where: str, places: Mapping[str, Location] |
                 values[key] = _check_value(key, value)
             except ProfileError as exc:
                 raise ProfileError(f"option --{key.replace('_', '-')}: {exc.message}") from None
-    return Machine(**values)  # type: ignore[arg-type]
+    limits = Limits(**{field: values.pop(key) for key, field in LIMIT_KEYS.items()})
+    return Machine(limits, **values)  # type: ignore[arg-type]
 
 
 def builtin_profiles() -> list[str]:
@@ -118,10 +119,30 @@ def builtin_profiles() -> list[str]:
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".yaml"))
 
 
+class _NotAProfile(yaml.MarkedYAMLError):
+    """Valid YAML that no profile holds (an alias, too many nodes)."""
+
+
 class _ProfileLoader(yaml.SafeLoader):
     """PyYAML's safe loader with two YAML 1.2 rules: `1e9` and `1.0e9` are floats (YAML 1.1's
     resolver wants a point and a signed exponent, and reads them as strings), and a key given
-    twice in one mapping is an error (PyYAML keeps the last silently)."""
+    twice in one mapping is an error (PyYAML keeps the last silently). A profile is a flat
+    mapping of numbers: anchors and aliases, which can make a short file expand into billions
+    of values, are refused, as are more than MAX_PROFILE_NODES nodes."""
+
+    nodes = 0
+
+    def compose_node(self, parent: yaml.Node | None, index: Any) -> yaml.Node:
+        event = self.peek_event()
+        if isinstance(event, yaml.AliasEvent) or getattr(event, "anchor", None) is not None:
+            raise _NotAProfile(problem="anchors and aliases (&name, *name) have no place in a "
+                               "machine profile", problem_mark=event.start_mark)
+        self.nodes += 1
+        if self.nodes > MAX_PROFILE_NODES:
+            raise _NotAProfile(problem=f"more than {MAX_PROFILE_NODES} YAML values: a machine "
+                               "profile is a flat mapping of a few numbers",
+                               problem_mark=event.start_mark)
+        return super().compose_node(parent, index)  # type: ignore[no-any-return]
 
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
         seen: set[Any] = set()
@@ -142,13 +163,30 @@ _ProfileLoader.add_implicit_resolver(
     list("-+0123456789."))
 
 
-def _key_places(text: str, where: str) -> dict[str, Location]:
+def _key_places(node: yaml.Node, where: str) -> dict[str, Location]:
     """Line and column of each top-level key, from the YAML node tree."""
-    node = yaml.compose(text)
     if not isinstance(node, yaml.MappingNode):
         return {}
     return {str(k.value): Location(where, k.start_mark.line + 1, k.start_mark.column + 1)
             for k, _ in node.value}
+
+
+def _read_profile(path: Path) -> str:
+    """The profile file's text, refused unreadable, not UTF-8 or above MAX_PROFILE_BYTES (read
+    no further: a device or a FIFO can be endless)."""
+    where = Location(str(path))
+    try:
+        with open(path, "rb") as handle:
+            data = handle.read(MAX_PROFILE_BYTES + 1)
+    except OSError as exc:
+        raise ProfileError(f"cannot read machine profile ({exc.strerror})", where) from None
+    if len(data) > MAX_PROFILE_BYTES:
+        raise ProfileError(f"a machine profile of more than {MAX_PROFILE_BYTES} bytes: it is a "
+                           "flat mapping of a few numbers", where)
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise ProfileError("cannot read machine profile (not UTF-8 text)", where) from None
 
 
 def load_machine(name_or_path: str, overrides: Mapping[str, Any] | None = None) -> Machine:
@@ -156,23 +194,23 @@ def load_machine(name_or_path: str, overrides: Mapping[str, Any] | None = None) 
     path = Path(name_or_path)
     if path.suffix in (".yaml", ".yml") or path.exists():
         where = str(path)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            reason = exc.strerror if isinstance(exc, OSError) else "not UTF-8 text"
-            raise ProfileError(f"cannot read machine profile ({reason})",
-                               Location(where)) from None
+        text = _read_profile(path)
     else:
         if name_or_path not in builtin_profiles():
             raise ProfileError(f"unknown machine '{name_or_path}': give a YAML file or one of "
                                f"{', '.join(builtin_profiles())}")
         where = f"{name_or_path}.yaml"
         text = (resources.files("nurbsfeed.configs") / where).read_text(encoding="utf-8")
+    loader = _ProfileLoader(text)  # a SafeLoader subclass
     try:
-        data = yaml.load(text, Loader=_ProfileLoader)  # a SafeLoader subclass
-        places = _key_places(text, where)
+        node = loader.get_single_node()
+        data = loader.construct_document(node) if node is not None else None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         loc = Location(where, mark.line + 1, mark.column + 1) if mark else Location(where)
-        raise ProfileError(f"not valid YAML ({getattr(exc, 'problem', exc)})", loc) from None
-    return machine_from_mapping(data, where, places, overrides)
+        problem = getattr(exc, "problem", exc)
+        raise ProfileError(problem if isinstance(exc, _NotAProfile)
+                           else f"not valid YAML ({problem})", loc) from None
+    finally:
+        loader.dispose()
+    return machine_from_mapping(data, where, _key_places(node, where), overrides)

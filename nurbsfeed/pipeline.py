@@ -29,7 +29,6 @@ from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.interpolate import PointChunk, Stepping
 from nurbsfeed.json_reader import json_program
 from nurbsfeed.machine import Machine
-from nurbsfeed.planning.limits import Limits
 from nurbsfeed.planning.planner import Plan, plan_curve
 from nurbsfeed.program import CurveBlock, PassThrough, ProgramItem
 from nurbsfeed.safety import MotionGuard, feed_cap_mm_s
@@ -90,13 +89,13 @@ def read_program(path: Path, text: str, dialect: str = "auto",
 
 
 def plan_block(block: CurveBlock, machine: Machine) -> Plan:
-    """Plan one curve under the machine converted to the block's units; a curve the planner
-    refuses (e.g. longer than max_curve_time_s) is refused at the block."""
-    units_machine = machine.in_program_units(block.units)
-    lim = Limits.from_machine(units_machine)
+    """Plan one curve, given in mm (`CurveBlock.in_mm`), under the machine's limits; a curve the
+    planner refuses (e.g. longer than max_curve_time_s) is refused at the block."""
+    if not block.lengths_in_mm:
+        raise ValueError("plan_block takes a block in mm: CurveBlock.in_mm()")
     try:
-        return plan_curve(block.curve, lim, block.feed_u, block.feed_mm_s,
-                          units_machine.max_curve_time_s)
+        return plan_curve(block.curve, machine.limits, block.feed_u, block.feed_mm_s,
+                          machine.max_curve_time_s)
     except CurveError as exc:
         raise exc.at(block.location) from None
 
@@ -143,8 +142,10 @@ def convert_block(block: CurveBlock, index: int, out: BinaryIO, machine: Machine
     The curve is stepped chunk by chunk (interpolate.Stepping) and every chunk goes to the
     writer (and the trace) before the next is stepped: memory does not grow with the curve's
     duration. A curve the planner refuses is refused before anything of it is written.
+    `block` comes as read, in the program's unit: converted to mm here, once, and written back
+    in its unit by the writer.
     """
-    units_machine = machine.in_program_units(block.units)
+    block = block.in_mm()
     label = f'curve {index} "{block.curve.name}"'
     try:
         plan = plan_block(block, machine)
@@ -165,8 +166,8 @@ def convert_block(block: CurveBlock, index: int, out: BinaryIO, machine: Machine
     else:
         if block.incremental:
             out.write(b"G90" + eol)
-        writer = MoveWriter(out, units_machine.decimals, units_machine.feed_decimals,
-                            period_s, block.eol, block.curve.points[0])
+        writer = MoveWriter(out, machine.decimals, machine.feed_decimals, period_s, block.eol,
+                            block.curve.points[0], block.units)
     s_mm = 0.0
     for chunk in Stepping(plan, method).chunks():
         try:

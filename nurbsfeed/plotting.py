@@ -47,11 +47,11 @@ def _finish(ax, ylabel: str, title: str) -> None:
     ax.legend(loc="upper right", fontsize=8, framealpha=0.9)
 
 
-def plot_run(target: Path, plan: Plan, result: Interpolation, series: RunSeries, units: str,
+def plot_run(target: Path, plan: Plan, result: Interpolation, series: RunSeries,
              machine_name: str) -> None:
     """Write the figure of one run to `target` (PNG, written atomically)."""
     lim = plan.limits
-    u = units  # "mm" or "in": every length below is in the program's unit
+    u = "mm"  # every length below, an inch program's too (CurveBlock.in_mm)
     fig = Figure(figsize=(15, 17), dpi=DPI, layout="constrained")
     FigureCanvasAgg(fig)
     (path_ax, feed_ax), (at_ax, an_ax), (jt_ax, jn_ax), (chord_ax, ff_ax) = fig.subplots(4, 2)
@@ -112,7 +112,7 @@ def plot_run(target: Path, plan: Plan, result: Interpolation, series: RunSeries,
     _limit(jn_ax, lim.normal_jerk_mm_s3, f"limit {lim.normal_jerk_mm_s3:g} {u}/s³")
     _finish(jn_ax, f"jerk [{u}/s³]", "normal jerk")
 
-    micro = "µm" if u == "mm" else "0.001 in"
+    micro = "µm"
     chord_ax.plot(tm, 1e3 * series.chord_error_mm, color="tab:purple", linewidth=0.8,
                   label="chord error on the true curve")
     chord_ax.set_ylim(bottom=0.0)

@@ -7,12 +7,16 @@ planned, interpolated and replaced by G1 moves.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from nurbsfeed.errors import Location
 from nurbsfeed.geometry import NurbsCurve
+
+MM_PER_INCH = 25.4
+MM_PER_UNIT = {"mm": 1.0, "in": MM_PER_INCH}  # G21, G20
 
 
 @dataclass(frozen=True)
@@ -27,8 +31,12 @@ class CurveBlock:
     """One NURBS curve of the program and the modal state it is executed in.
 
     feed_u / feed_mm_s: the programmed feed as a step function of u (design §3a: an F word on a
-    Fanuc control point j caps the spans from j on). feed_u[0] == curve.u_min; feed_mm_s is in
-    program units per second, inf where no feed was programmed. Empty arrays mean "no cap".
+    Fanuc control point j caps the spans from j on). feed_u[0] == curve.u_min; feed_mm_s is per
+    second, inf where no feed was programmed. Empty arrays mean "no cap".
+
+    A reader yields the block in the program's unit `units`; `in_mm` converts its lengths (the
+    curve's control points, the programmed feed) to mm, the one unit nurbsfeed plans, steps and
+    checks in. `units` stays the program's: the writer converts back to it.
     """
 
     curve: NurbsCurve
@@ -40,6 +48,22 @@ class CurveBlock:
     # (always with a decimal point: it is written by us)
     feed_u: np.ndarray = field(default_factory=lambda: np.empty(0))
     feed_mm_s: np.ndarray = field(default_factory=lambda: np.empty(0))
+    lengths_in_mm: bool = False  # True once `in_mm` has converted curve and feed_mm_s
+
+    def in_mm(self) -> "CurveBlock":
+        """This block with its lengths in mm: the form every stage after reading takes. The
+        knots, weights and feed_u are not lengths and stay as read."""
+        if self.lengths_in_mm:
+            return self
+        scale = MM_PER_UNIT[self.units]
+        curve = self.curve
+        if scale != 1.0:
+            points = curve.points * scale
+            points.setflags(write=False)
+            curve = NurbsCurve(curve.degree, curve.knots, points, curve.weights, curve.name,
+                               curve.u_origin, curve.u_scale)
+        return dataclasses.replace(self, curve=curve, feed_mm_s=self.feed_mm_s * scale,
+                                   lengths_in_mm=True)
 
 
 ProgramItem = PassThrough | CurveBlock

@@ -32,7 +32,7 @@ def butterfly() -> NurbsCurve:
 
 @pytest.fixture(scope="session")
 def paper_limits() -> Limits:
-    return Limits.from_machine(load_machine("paper-table1"))
+    return load_machine("paper-table1").limits
 
 
 PROFILES = ("default", "paper-table1")

@@ -10,6 +10,7 @@ the written program arriving where and when the plan does.
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import os
 from pathlib import Path
@@ -32,7 +33,7 @@ from tests.conftest import load_curve
 from tests.motion_check import FD_REL, motion, written_moves
 
 CASES = Path(__file__).parent / "data" / "degenerate"
-DEFAULT = Limits.from_machine(load_machine("default"))
+DEFAULT = load_machine("default").limits
 # At rest: the moves on either side of a stop are at most this long (v <= 1 mm/s at 1 ms).
 REST_MOVE_MM = 1e-3
 # Hypothesis examples of the random-curve property, the same ones on every run of the suite;
@@ -109,7 +110,7 @@ def assert_rests_at(points: np.ndarray, u: np.ndarray, curve: NurbsCurve,
 def test_degenerate_case(name: str) -> None:
     curve = load(name)
     stops, length_mm = EXPECTED[name]
-    plan = plan_curve(curve, Limits.from_machine(load_machine("default"), 100.0))
+    plan = plan_curve(curve, dataclasses.replace(load_machine("default").limits, feed_mm_s=100.0))
     found = [(float(plan.key_u[k]), KIND_NAMES[int(plan.key_kind[k])])
              for k in range(plan.key_u.size) if plan.key_kind[k] in (KIND_CORNER, KIND_CUSP)]
     assert [kind for _, kind in found] == [kind for _, kind in stops]
@@ -187,7 +188,7 @@ def degenerate_curves(draw) -> NurbsCurve:
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
 @given(degenerate_curves(), st.sampled_from([20.0, 100.0, 200.0]))
 def test_random_degenerate_curves_move_on_the_curve_within_the_limits(curve, feed_mm_s) -> None:
-    lim = Limits.from_machine(load_machine("default"), feed_mm_s)
+    lim = dataclasses.replace(load_machine("default").limits, feed_mm_s=feed_mm_s)
     plan = plan_curve(curve, lim)
     assume(plan.n_periods < 40_000)  # keep the example fast; long plans are no different
     result = interpolate(plan)

@@ -176,8 +176,8 @@ def profile(tmp_path: Path, text: str) -> Path:
 def test_yaml_exponent_without_point_or_sign_is_a_number(tmp_path: Path) -> None:
     from nurbsfeed.machine import load_machine
 
-    assert load_machine(str(profile(tmp_path, "max_jerk_mm_s3: 1.0e9\n"))).max_jerk_mm_s3 == 1e9
-    assert load_machine(str(profile(tmp_path, "max_jerk_mm_s3: 5E4\n"))).max_jerk_mm_s3 == 5e4
+    assert load_machine(str(profile(tmp_path, "max_jerk_mm_s3: 1.0e9\n"))).limits.jerk_mm_s3 == 1e9
+    assert load_machine(str(profile(tmp_path, "max_jerk_mm_s3: 5E4\n"))).limits.jerk_mm_s3 == 5e4
 
 
 def test_yaml_duplicate_key_is_refused_at_the_second(tmp_path: Path) -> None:

@@ -8,11 +8,10 @@ import pytest
 from nurbsfeed.errors import CurveError
 from nurbsfeed.interpolate import interpolate
 from nurbsfeed.machine import load_machine
-from nurbsfeed.planning.limits import Limits
 from nurbsfeed.planning.planner import plan_curve
 from nurbsfeed.safety import GUARD_ACC_REL, GUARD_FEED_REL, MotionGuard
 
-DEFAULT = Limits.from_machine(load_machine("default"))  # 200 mm/s, 2000 mm/s^2, 1 ms
+DEFAULT = load_machine("default").limits  # 200 mm/s, 2000 mm/s^2, 1 ms
 
 
 def line(speed_mm_s: float, n: int, direction=(1.0, 0.0, 0.0)) -> np.ndarray:

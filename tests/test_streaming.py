@@ -73,7 +73,7 @@ def test_small_chunks_write_the_same_program_and_trace_as_one_chunk(
     assert chunked[1] == whole[1]
     # the program really was stepped in many chunks, through every kind of landing
     machine = load_machine("paper-table1")
-    blocks = [item for item in json_items(source) if isinstance(item, CurveBlock)]
+    blocks = [item.in_mm() for item in json_items(source) if isinstance(item, CurveBlock)]
     results = [interpolate(plan_block(b, machine), method) for b in blocks]
     periods = [r.n_points - 1 for r in results]
     assert min(p for p in periods if p) > SMALL_CHUNK and max(periods) > 20 * SMALL_CHUNK
@@ -122,7 +122,7 @@ def peak_bytes(feed_mm_s: float, trace: bool, monkeypatch: pytest.MonkeyPatch) -
     machine = load_machine("paper-table1", {"max_feed_mm_s": feed_mm_s})
     block = next(item for item in json_items(SAMPLES / "quarter-circle.json")
                  if isinstance(item, CurveBlock))
-    plan = plan_block(block, machine)
+    plan = plan_block(block.in_mm(), machine)
     monkeypatch.setattr(pipeline, "plan_block", lambda *_: plan)
     tracemalloc.start()
     try:
@@ -178,7 +178,7 @@ def test_a_curve_longer_than_max_curve_time_is_refused_without_output(tmp_path: 
     source = SAMPLES / "quarter-circle.json"
     machine = load_machine("default", {"max_feed_mm_s": 1.0})
     block = next(item for item in json_items(source) if isinstance(item, CurveBlock))
-    plan = plan_block(block, machine)  # 15.7 s
+    plan = plan_block(block.in_mm(), machine)  # 15.7 s
     out = tmp_path / "q.nc"
     code, stdout, stderr = run("convert", str(source), "--max-feed-mm-s", "1",
                                "--max-curve-time-s", "10", "-o", str(out))

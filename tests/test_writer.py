@@ -8,6 +8,8 @@ import re
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
 from nurbsfeed.gcode.writer import MoveWriter, format_number, round_ticks, run_start
 from tests.gcode_parse import moves
@@ -26,12 +28,30 @@ from tests.gcode_parse import moves
 ])
 def test_number_format_always_has_a_point_and_never_a_negative_zero(value, decimals,
                                                                    text) -> None:
+    assert written_x(value, decimals) == text
     assert format_number(value, decimals) == text
 
 
+def written_x(value: float, decimals: int) -> str:
+    """The X word the hot loop writes for a move to X = value (from one unit further on)."""
+    text, _ = write(np.array([[value + 1.0, 0.0, 0.0], [value, 0.0, 0.0]]), decimals)
+    return text.split()[1].removeprefix("X")
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.floats(-1e6, 1e6, allow_nan=False), st.integers(0, 8))
+def test_format_number_writes_what_the_hot_loop_writes(value: float, decimals: int) -> None:
+    assume(round(value * 10.0**decimals) != round((value + 1.0) * 10.0**decimals))
+    assert format_number(value, decimals) == written_x(value, decimals)
+
+
+def test_format_number_writes_any_finite_value() -> None:
+    assert format_number(1e20, 0) == "100000000000000000000."
+    assert (format_number(2.5, 0), format_number(-0.5, 0)) == ("3.", "-1.")  # half away from 0
+    assert format_number(-4e-7, 6) == "0."
+
+
 def test_decimals_beyond_int64_ticks_are_refused() -> None:
-    with pytest.raises(ValueError):
-        format_number(1.0, 19)
     with pytest.raises(ValueError):
         MoveWriter(io.BytesIO(), 19, 3, 0.001, "\n", np.zeros(3))
 

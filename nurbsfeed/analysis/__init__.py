@@ -8,8 +8,8 @@
 - `series.run_series`: what `nurbsfeed plot` draws for one interpolated curve.
 - `geometry`: chord errors, arc length and curvature on the true curve, shared by check and plot.
 
-Lengths are in the program's unit ("mm" in names), times in seconds. No printing: `render_*`
-return text for the command line.
+Lengths are in mm (the curves come in mm, `CurveBlock.in_mm`), times in seconds. No printing:
+`render_*` return text for the command line.
 """
 
 from nurbsfeed.analysis.check import CHECKS, CheckReport, check_files, render_check

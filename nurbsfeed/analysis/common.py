@@ -41,6 +41,6 @@ def time_optimal_bound_s(plan: Plan) -> float:
 
 
 def curve_blocks(path: Path, machine: Machine, dialect: str = "auto") -> list[CurveBlock]:
-    """The NURBS curves of an input file, in file order."""
+    """The NURBS curves of an input file, in file order, in mm (`CurveBlock.in_mm`)."""
     items = read_program(path, read_text(path), dialect, machine.decimals)
-    return [item for item in items if isinstance(item, CurveBlock)]
+    return [item.in_mm() for item in items if isinstance(item, CurveBlock)]

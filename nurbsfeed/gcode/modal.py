@@ -33,9 +33,11 @@ from dataclasses import dataclass, field
 
 from nurbsfeed.errors import InputError, Location
 from nurbsfeed.gcode.tokenizer import Block, Word, code_name
+from nurbsfeed.gcode.writer import format_number
+from nurbsfeed.program import MM_PER_INCH
 
 AXES = ("X", "Y", "Z")
-MM_PER_INCH = 25.4
+VALUE_DECIMALS = 6  # finer than any control's input increment
 INPUT_INCREMENT = {"mm": 0.001, "in": 0.0001}  # IS-B least input increment
 
 # G and M codes in tenths (tokenizer.Word.code).
@@ -120,9 +122,10 @@ def tolerance(units: str, *decimals: int | None) -> float:
 
 
 def format_value(value: float) -> str:
-    """A number as G-code text with a decimal point: 1200 -> "1200.", -0.5 -> "-0.5"."""
-    text = f"{value:.6f}".rstrip("0")
-    return "0." if text in ("-0.", "-") else text
+    """A number read from the program, written back (an F word written without a point, a
+    value in a message) the way nurbsfeed writes numbers, to VALUE_DECIMALS: 1200 -> "1200.",
+    -0.5 -> "-0.5"."""
+    return format_number(value, VALUE_DECIMALS)
 
 
 @dataclass

@@ -6,11 +6,18 @@ written move, so every move lasts n * T with n >= 1 (n > 1 only near standstill)
 60 |dP^| / (n T) from the *rounded* coordinates, so the controller spends exactly the planned time
 on every move. Only axes that change and F words that change are written (modal words).
 
-All of it runs in one loop in numba's subset, `_emit_moves`, point by point: round to integers
-of output units ("ticks"), drop a point equal to the last written one, compute F, and write the
-text: always a decimal point, trailing zeros dropped (`50.`, `12.34`), never `-0.`. F is written
-with `feed_decimals`, or more when F is small, so that it keeps 5 significant digits.
-`format_number` gives the same text for one value (it is `_emit_moves`' own X word).
+How nurbsfeed writes a number with d decimals, every number it writes (coordinates, F words,
+an F word it restores): value * 10^d, in double precision, rounded half away from zero to an
+integer (`_round_tick`); its digits with the point before the last d, at least one digit before
+it; trailing zeros after the point dropped, the point always kept; no minus sign on zero
+(`50.`, `12.34`, `0.`, `-0.5`). Coordinates are written with `decimals` (one more in inch
+programs, `written_decimals`), F with `feed_decimals`, or more when F is small, so that it keeps
+5 significant digits.
+
+All of it runs in one loop in numba's subset, `_emit_moves`, point by point: convert mm to the
+program's unit, round to integers of output units ("ticks"), drop a point equal to the last
+written one, compute F, and write the text. `format_number` writes one number by the same rule
+in plain Python, for the few written elsewhere (tests hold the two to the same bytes).
 
 A curve comes in chunks (`MoveWriter.add_points`, then `end_curve`): the writer's state between
 them is the last written point, the periods since it, the last F and the held run of points that
@@ -25,6 +32,7 @@ from typing import BinaryIO
 import numpy as np
 
 from nurbsfeed.jit import jit
+from nurbsfeed.program import MM_PER_UNIT
 
 FEED_SIGNIFICANT_DIGITS = 5
 FEED_MAX_DECIMALS = 6
@@ -33,7 +41,6 @@ _BYTES_PER_LINE = 4 + 3 * 23 + 24 + 2
 
 _AXES = np.array([ord("X"), ord("Y"), ord("Z")], dtype=np.uint8)
 _FEED_POW10 = 10.0 ** np.arange(FEED_MAX_DECIMALS + 1)
-_LF = np.frombuffer(b"\n", dtype=np.uint8)
 _POW10 = np.array([10**k for k in range(20)], dtype=np.uint64)
 _ONES = np.array([48 + k % 10 for k in range(100)], dtype=np.uint8)  # "00".."99", digit by digit
 _TENS = np.array([48 + k // 10 for k in range(100)], dtype=np.uint8)
@@ -66,17 +73,18 @@ def _put_quad(buf, end, quad):
 
 @jit
 def _round_tick(value, scale):
-    """value * scale rounded to an integer, half away from zero."""
+    """value * scale rounded to an integer, half away from zero: THE rounding rule of every
+    number nurbsfeed writes (scale = 10^decimals)."""
     scaled = value * scale
     whole = int(math.floor(abs(scaled) + 0.5))
     return -whole if scaled < 0.0 else whole
 
 
 @jit
-def _round_many(values, scale, out):
-    """`_round_tick` of every value: values, out (M,)."""
+def _round_many(values, per_mm, scale, out):
+    """`_round_tick` of every value in mm converted to the output unit: values, out (M,)."""
     for q in range(values.size):
-        out[q] = _round_tick(values[q], scale)
+        out[q] = _round_tick(values[q] * per_mm, scale)
 
 
 # _emit_moves' state between calls (an int64 array): the last written point in ticks, the
@@ -86,11 +94,12 @@ _X, _Y, _Z, _PENDING, _FEED, _FIRST, _MOVES = range(7)
 
 
 @jit
-def _emit_moves(points, decimals, scale, unit, period_s, feed_decimals, pow10, eol, axes, state,
-                buf):
-    """Write the G1 lines of points (M, 3), which follow the state's last point one period
-    apart, into buf; return the bytes used. scale = 10^decimals, unit = 10^-decimals; pow10[k]
-    = 10^k for the F decimals k; decimals <= MAX_DECIMALS.
+def _emit_moves(points, per_mm, decimals, scale, unit, period_s, feed_decimals, pow10, eol, axes,
+                state, buf):
+    """Write the G1 lines of points (M, 3) in mm, which follow the state's last point one period
+    apart, into buf; return the bytes used. per_mm: output units per mm (1 or 1/25.4);
+    scale = 10^decimals, unit = 10^-decimals (output units); pow10[k] = 10^k for the F decimals
+    k; decimals <= MAX_DECIMALS.
 
     A point whose ticks equal the last written ones only adds its period to the next move.
     F = 60 |dP^| / (n T) from the ticks, written with the decimals that keep
@@ -109,9 +118,9 @@ def _emit_moves(points, decimals, scale, unit, period_s, feed_decimals, pow10, e
     moves = 0
     pos = 0
     for k in range(points.shape[0]):
-        tx = _round_tick(points[k, 0], scale)
-        ty = _round_tick(points[k, 1], scale)
-        tz = _round_tick(points[k, 2], scale)
+        tx = _round_tick(points[k, 0] * per_mm, scale)
+        ty = _round_tick(points[k, 1] * per_mm, scale)
+        tz = _round_tick(points[k, 2] * per_mm, scale)
         pending += 1
         if tx == lx and ty == ly and tz == lz:
             continue
@@ -223,20 +232,21 @@ def _emit_moves(points, decimals, scale, unit, period_s, feed_decimals, pow10, e
     return pos
 
 
-def round_ticks(points: np.ndarray, decimals: int) -> np.ndarray:
-    """(N, 3) coordinates -> (N, 3) int64 in units of 10^-decimals (round half away from 0)."""
+def round_ticks(points: np.ndarray, decimals: int, per_mm: float = 1.0) -> np.ndarray:
+    """(N, 3) coordinates in mm -> (N, 3) int64 in units of 10^-decimals of the output unit
+    (per_mm of them to a mm), rounded as `_emit_moves` rounds them."""
     values = np.ascontiguousarray(points, dtype=float)
     out = np.empty(values.shape, dtype=np.int64)
-    _round_many(values.reshape(-1), 10.0**decimals, out.reshape(-1))
+    _round_many(values.reshape(-1), per_mm, 10.0**decimals, out.reshape(-1))
     return out
 
 
-def run_start(points: np.ndarray, ticks: np.ndarray, decimals: int) -> int:
+def run_start(points: np.ndarray, ticks: np.ndarray, decimals: int, per_mm: float = 1.0) -> int:
     """Index of the first of the trailing points of points (M, 3) that round onto ticks (3,):
     M if the last one does not, 0 if all of them do. Only the last few are looked at."""
     look = min(16, len(points))
     while look:
-        tail = round_ticks(points[-look:], decimals)
+        tail = round_ticks(points[-look:], decimals, per_mm)
         differ = np.flatnonzero(np.any(tail != ticks, axis=1))
         if differ.size:
             return len(points) - look + int(differ[-1]) + 1
@@ -251,13 +261,22 @@ def _check_decimals(decimals: int) -> None:
         raise ValueError(f"decimals must be from 0 to {MAX_DECIMALS}, not {decimals}")
 
 
+def written_decimals(decimals: int, units: str) -> int:
+    """The coordinate decimals written in a program of `units` for a profile's `decimals`: one
+    more in inches, whose last digit (0.00001 in = 0.25 um) is then as fine as the mm one."""
+    return decimals + 1 if units == "in" else decimals
+
+
 class MoveWriter:
-    """Writes the G1 moves of one curve to a binary stream, chunk by chunk."""
+    """Writes the G1 moves of one curve to a binary stream, chunk by chunk: points in mm, text
+    in the program's `units`, coordinates with `written_decimals(decimals, units)` decimals."""
 
     def __init__(self, out: BinaryIO, decimals: int, feed_decimals: int, period_s: float,
-                 eol: str, start: np.ndarray) -> None:
+                 eol: str, start: np.ndarray, units: str = "mm") -> None:
+        decimals = written_decimals(decimals, units)
         _check_decimals(decimals)
         self.out = out
+        self.per_mm = 1.0 / MM_PER_UNIT[units]
         self.decimals = decimals
         self.scale = 10.0**decimals
         self.unit = 10.0**-decimals
@@ -265,7 +284,8 @@ class MoveWriter:
         self.period_s = period_s
         self.eol = np.frombuffer(eol.encode("ascii"), dtype=np.uint8)
         self.state = np.zeros(7, dtype=np.int64)
-        self.state[:3] = round_ticks(np.asarray(start, dtype=float)[None, :], decimals)[0]
+        self.state[:3] = round_ticks(np.asarray(start, dtype=float)[None, :], decimals,
+                                     self.per_mm)[0]
         self.state[_FEED] = -1
         self.state[_FIRST] = 1
         self.buf = np.empty(0, dtype=np.uint8)
@@ -297,8 +317,8 @@ class MoveWriter:
         """
         if len(points) == 0:
             return
-        last = round_ticks(points[-1:], self.decimals)[0]
-        first_held = run_start(points, last, self.decimals)
+        last = round_ticks(points[-1:], self.decimals, self.per_mm)[0]
+        first_held = run_start(points, last, self.decimals, self.per_mm)
         if first_held == 0 and self.held_count and np.array_equal(self.held_ticks, last):
             self.held_count += len(points)
             return
@@ -329,32 +349,29 @@ class MoveWriter:
         if self.buf.size < size:
             self.buf = np.empty(size, dtype=np.uint8)
         for lo in range(0, len(points), CHUNK_POINTS):
-            used = _emit_moves(points[lo:lo + CHUNK_POINTS], self.decimals, self.scale,
-                               self.unit, self.period_s, self.feed_decimals, _FEED_POW10,
-                               self.eol, _AXES, self.state, self.buf)
+            used = _emit_moves(points[lo:lo + CHUNK_POINTS], self.per_mm, self.decimals,
+                               self.scale, self.unit, self.period_s, self.feed_decimals,
+                               _FEED_POW10, self.eol, _AXES, self.state, self.buf)
             self.out.write(self.buf[:used])
 
 
 def format_number(value: float, decimals: int) -> str:
-    """The writer's number format for one value (used for comments and restoring lines): the X
-    word that `_emit_moves` writes for a move to X = value."""
-    _check_decimals(decimals)
-    point = np.array([[value, 0.0, 0.0]])
-    state = np.zeros(7, dtype=np.int64)
-    # the last point differs from this one in X only, so the move is "X<value> F<feed>\n"
-    state[_X] = round_ticks(point, decimals)[0, 0] + 1
-    state[_FEED] = -1
-    buf = np.empty(_BYTES_PER_LINE, dtype=np.uint8)
-    used = _emit_moves(point, decimals, 10.0**decimals, 10.0**-decimals, 1.0, 0, _FEED_POW10,
-                       _LF, _AXES, state, buf)
-    return buf[1:used].tobytes().decode("ascii").split(" ")[0]
+    """`value` written as nurbsfeed writes every number (the module docstring's rule): the text
+    `_emit_moves` builds byte by byte, for the few numbers written outside it. Its integer
+    arithmetic is Python's, unbounded, so any finite value is written."""
+    scaled = value * 10.0**decimals
+    ticks = math.floor(abs(scaled) + 0.5)  # `_round_tick`
+    whole, fraction = divmod(ticks, 10**decimals)
+    digits = f"{fraction:0{decimals}d}".rstrip("0") if decimals else ""
+    return f"{'-' if scaled < 0.0 and ticks else ''}{whole}.{digits}"
 
 
 def cycle_comment(curve_index: int, name: str, n_points: int, period_s: float, method: str,
                   cycle_s: float, length_mm: float, units: str) -> str:
-    """The comment line written before each replaced block (no parentheses inside)."""
+    """The comment line written before each replaced block (no parentheses inside); the length
+    in the program's `units`, as the moves under it."""
     clean = "".join(ch for ch in name if ch not in "()\r\n")
-    unit = "mm" if units == "mm" else "in"
     return (f"(nurbsfeed: curve {curve_index} {clean}, {n_points} points, period "
-            f"{period_s * 1e3:g} ms, {method}, length {length_mm:.3f} {unit}, "
+            f"{period_s * 1e3:g} ms, {method}, length {length_mm / MM_PER_UNIT[units]:.3f} "
+            f"{units}, "
             f"planned cycle {cycle_s:.3f} s)")

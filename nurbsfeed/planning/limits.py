@@ -1,7 +1,7 @@
 """The pointwise speed limit of a curve point (paper Eq. 15, corrected) and the curvature threshold
 (Eq. 16).
 
-Names: kappa_1_mm curvature, v_mm_s speed; "mm" is the program's length unit.
+Names: kappa_1_mm curvature, v_mm_s speed, in mm and seconds.
 """
 
 from __future__ import annotations
@@ -10,12 +10,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nurbsfeed.machine import Machine
-
 
 @dataclass(frozen=True)
 class Limits:
-    """The limits one curve is planned under, in program units and seconds."""
+    """The kinematic limits of a machine (`machine.Machine.limits`, from the profile's keys
+    max_feed_mm_s ...), in mm and seconds. A curve with a programmed feed is planned under
+    `dataclasses.replace(limits, feed_mm_s=min(limits.feed_mm_s, programmed))`."""
 
     period_s: float
     feed_mm_s: float  # v_m: min(machine max feed, programmed feed)
@@ -24,12 +24,6 @@ class Limits:
     jerk_mm_s3: float  # J_t
     normal_acc_mm_s2: float  # A_n
     normal_jerk_mm_s3: float  # J_n
-
-    @classmethod
-    def from_machine(cls, machine: Machine, feed_mm_s: float = np.inf) -> "Limits":
-        return cls(machine.period_s, min(machine.max_feed_mm_s, feed_mm_s),
-                   machine.chord_error_mm, machine.max_acc_mm_s2, machine.max_jerk_mm_s3,
-                   machine.max_normal_acc_mm_s2, machine.max_normal_jerk_mm_s3)
 
 
 def curvature_threshold(lim: Limits) -> float:

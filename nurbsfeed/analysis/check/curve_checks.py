@@ -14,13 +14,15 @@ from nurbsfeed.analysis.check.estimates import (
     stencils,
     turning_rad,
 )
-from nurbsfeed.analysis.check.output_program import Section, decode_moves, round_written
+from nurbsfeed.analysis.check.output_program import Section, decode_moves
 from nurbsfeed.analysis.check.projection import project_points
 from nurbsfeed.analysis.check.report import Estimation, Findings
 from nurbsfeed.analysis.geometry import arc_length_mm, chord_errors_mm, curvature_1_mm
 from nurbsfeed.geometry import NurbsCurve
-from nurbsfeed.machine import MM_PER_INCH, Machine
-from nurbsfeed.program import CurveBlock
+from nurbsfeed.gcode.writer import round_ticks, written_decimals
+from nurbsfeed.machine import Machine
+from nurbsfeed.planning.limits import Limits
+from nurbsfeed.program import MM_PER_UNIT, CurveBlock
 
 #
 # Reference: only the source's curves and the machine profile; the planner is never run. Each
@@ -127,17 +129,20 @@ def least_time_s(block: CurveBlock, feed_mm_s: float, acc_mm_s2: float) -> float
 
 def check_section(section: Section, block: CurveBlock, machine: Machine,
                   findings: Findings) -> None:
-    """Geometry, coverage, timing and kinematics of one curve's moves."""
-    m = machine.in_program_units(block.units)
+    """Geometry, coverage, timing and kinematics of one curve's moves. `block` is in mm
+    (`CurveBlock.in_mm`); the section's words, in the program's unit, are converted to mm as
+    they are decoded, so every measure and every limit is in mm (and so is the report)."""
+    lim = machine.limits
     curve = block.curve
-    scale = MM_PER_INCH if block.units == "in" else 1.0
-    period = m.period_s
-    r = 0.5 * 10.0**-m.decimals * math.sqrt(3.0)
-    acc_total = math.hypot(m.max_acc_mm_s2, m.max_normal_acc_mm_s2)
-    h_a = baseline_s(period, 2, r, m.max_acc_mm_s2)
-    h_j = baseline_s(period, 3, r, m.max_jerk_mm_s3)
-    h_x = baseline_s(period, 2, r, min(m.max_acc_mm_s2, m.max_normal_acc_mm_s2))
-    findings.estimation.append(Estimation(section.index, r * scale, h_a, h_j, h_x))
+    mm_per_unit = MM_PER_UNIT[block.units]
+    decimals = written_decimals(machine.decimals, block.units)
+    period = lim.period_s
+    r = 0.5 * 10.0**-decimals * math.sqrt(3.0) * mm_per_unit
+    acc_total = math.hypot(lim.acc_mm_s2, lim.normal_acc_mm_s2)
+    h_a = baseline_s(period, 2, r, lim.acc_mm_s2)
+    h_j = baseline_s(period, 3, r, lim.jerk_mm_s3)
+    h_x = baseline_s(period, 2, r, min(lim.acc_mm_s2, lim.normal_acc_mm_s2))
+    findings.estimation.append(Estimation(section.index, r, h_a, h_j, h_x))
     if abs(section.period_ms * 1e-3 - period) > 1e-9 * period:
         findings.add("comment", section.comment_line,
                      f"the comment announces a {section.period_ms:g} ms period, the machine "
@@ -146,15 +151,19 @@ def check_section(section: Section, block: CurveBlock, machine: Machine,
         length = float(arc_length_mm(curve, np.array([curve.u_max]))[0])
         if length > r:
             findings.add("no-moves", section.comment_line,
-                         f"no move written but the curve is {length * scale:.4g} mm long")
+                         f"no move written but the curve is {length:.4g} mm long")
         return
 
     axes, feed_words, lines = decode_moves(section, findings)
+    axes *= mm_per_unit
+    feed_words *= mm_per_unit
     if np.isnan(feed_words[0]):
         findings.add("feed-word", int(lines[0]), "the first move has no F word (it would run at "
                      "the program's modal feed)")
     pos = np.empty((len(lines) + 1, 3))
-    pos[0] = round_written(curve.points[0], m.decimals)
+    # the start as the writer rounds it
+    pos[0] = (round_ticks(curve.points[:1], decimals, 1.0 / mm_per_unit)[0] * 10.0**-decimals
+              * mm_per_unit)
     for k in range(len(lines)):
         pos[k + 1] = np.where(np.isnan(axes[k]), pos[k], axes[k])
     feed_mm_min = feed_words.copy()
@@ -166,48 +175,47 @@ def check_section(section: Section, block: CurveBlock, machine: Machine,
         findings.add("zero-length", int(lines[k]), "move does not move (same point as the "
                      "one before, as written)")
 
-    t_s = _check_timing(section, block, m, r, step_mm, feed_mm_min, lines, findings, scale)
+    t_s = _check_timing(section, block, lim, r, step_mm, feed_mm_min, lines, findings)
     point_lines = np.concatenate([[section.comment_line], lines])
 
     # ---- geometry: project every point, deviation, ends, chord error, coverage ----
     dev_allow = r * (1.0 + NUMERIC_REL_TOL)
     u, dist = project_points(curve, pos, 2.0 * r, dev_allow,
-                             ANCHOR_ROUNDINGS * (r + m.chord_error_mm))
-    findings.measure("path-deviation", dist[1:], 0.0, dev_allow, lines, scale)
+                             ANCHOR_ROUNDINGS * (r + lim.chord_mm))
+    findings.measure("path-deviation", dist[1:], 0.0, dev_allow, lines)
     end_gap = float(np.linalg.norm(pos[-1] - curve.points[-1]))
     if end_gap > dev_allow:
         findings.add("end-point", int(lines[-1]),
-                     f"the last point is {end_gap * scale:.4g} mm from the curve end "
-                     f"{_xyz(curve.points[-1])} (rounding allows {r * scale:.4g} mm)")
+                     f"the last point is {end_gap:.4g} mm from the curve end "
+                     f"{_xyz(curve.points[-1])} (rounding allows {r:.4g} mm)")
     good = dist <= dev_allow
     pair = good[:-1] & good[1:]
     err = chord_errors_mm(curve, u[:-1][pair], u[1:][pair], pos[:-1][pair], pos[1:][pair])
-    findings.measure("chord-error", err, m.chord_error_mm, r * (1.0 + NUMERIC_REL_TOL),
-                     lines[pair], scale)
-    cap = np.minimum(m.max_feed_mm_s, np.maximum(feed_cap_mm_s(block, u[:-1]),
+    findings.measure("chord-error", err, lim.chord_mm, r * (1.0 + NUMERIC_REL_TOL),
+                     lines[pair])
+    cap = np.minimum(lim.feed_mm_s, np.maximum(feed_cap_mm_s(block, u[:-1]),
                                                  feed_cap_mm_s(block, u[1:])))
     dt = np.diff(t_s)
-    findings.measure("feed", step_mm / dt, cap, 2.0 * r / dt, lines, scale)
+    findings.measure("feed", step_mm / dt, cap, 2.0 * r / dt, lines)
 
     ug, tg, pl = u[good], t_s[good], point_lines[good]
     if ug.size >= 2:
         kappa = curvature_1_mm(curve, ug)
         e = r * (1.0 + np.minimum(kappa * r, 1.0))
         s = arc_length_mm(curve, ug)
-        cap_g = np.minimum(m.max_feed_mm_s, np.maximum(feed_cap_mm_s(block, ug[:-1]),
+        cap_g = np.minimum(lim.feed_mm_s, np.maximum(feed_cap_mm_s(block, ug[:-1]),
                                                        feed_cap_mm_s(block, ug[1:])))
-        findings.measure("coverage", np.diff(s), cap_g * np.diff(tg), e[:-1] + e[1:], pl[1:],
-                         scale)
-        _check_arc_kinematics(curve, m, ug, tg, pl, s, e, kappa, h_a, h_j, findings, scale)
-    _check_xyz_kinematics(curve, m, pos, t_s, u, point_lines, r, acc_total, h_x, findings, scale)
+        findings.measure("coverage", np.diff(s), cap_g * np.diff(tg), e[:-1] + e[1:], pl[1:])
+        _check_arc_kinematics(curve, lim, ug, tg, pl, s, e, kappa, h_a, h_j, findings)
+    _check_xyz_kinematics(curve, lim, pos, t_s, u, point_lines, r, acc_total, h_x, findings)
 
 
-def _check_timing(section: Section, block: CurveBlock, m: Machine, r: float,
+def _check_timing(section: Section, block: CurveBlock, lim: Limits, r: float,
                   step_mm: np.ndarray, feed_mm_min: np.ndarray, lines: np.ndarray,
-                  findings: Findings, scale: float) -> np.ndarray:
+                  findings: Findings) -> np.ndarray:
     """Segment times, multi-period moves, period total and cycle time; returns the time of every
     point (M+1,) on the period grid."""
-    period = m.period_s
+    period = lim.period_s
     with np.errstate(divide="ignore", invalid="ignore"):
         seconds = step_mm / (feed_mm_min / 60.0)
     usable = np.isfinite(seconds) & (seconds > 0.0)
@@ -217,8 +225,8 @@ def _check_timing(section: Section, block: CurveBlock, m: Machine, r: float,
     findings.measure("segment-time", off_pct[usable], 100.0 * SEGMENT_TIME_REL_TOL, 0.0,
                      lines[usable])
     multi = n_periods > 1
-    findings.measure("skipped-periods", step_mm[multi], 4.0 * r + m.max_acc_mm_s2 * period**2,
-                     0.0, lines[multi], scale)
+    findings.measure("skipped-periods", step_mm[multi], 4.0 * r + lim.acc_mm_s2 * period**2,
+                     0.0, lines[multi])
     total = int(n_periods.sum())
     announced = section.n_points - 1
     if total > announced:
@@ -234,24 +242,24 @@ def _check_timing(section: Section, block: CurveBlock, m: Machine, r: float,
                               f"{announced} announced periods: the last point rounds onto the "
                               f"end point and is not written")
     written_s = float(np.sum(seconds[usable]))
-    least_s = least_time_s(block, m.max_feed_mm_s, m.max_acc_mm_s2)
+    least_s = least_time_s(block, lim.feed_mm_s, lim.acc_mm_s2)
     findings.measure("cycle-time", least_s, written_s,
-                     SEGMENT_TIME_REL_TOL * written_s + 2.0 * r / m.max_feed_mm_s,
+                     SEGMENT_TIME_REL_TOL * written_s + 2.0 * r / lim.feed_mm_s,
                      int(lines[-1]))
     return period * np.concatenate([[0], np.cumsum(n_periods)])
 
 
-def _check_arc_kinematics(curve: NurbsCurve, m: Machine, ug: np.ndarray, tg: np.ndarray,
+def _check_arc_kinematics(curve: NurbsCurve, lim: Limits, ug: np.ndarray, tg: np.ndarray,
                           pl: np.ndarray, s: np.ndarray, e: np.ndarray, kappa: np.ndarray,
-                          h_a: float, h_j: float, findings: Findings, scale: float) -> None:
+                          h_a: float, h_j: float, findings: Findings) -> None:
     """Tangential a, j and normal a, j from the projected arc lengths s(t) (G,) of the points
     that lie on the curve."""
-    for name, order, h, limit in (("tangential-acc", 2, h_a, m.max_acc_mm_s2),
-                                  ("tangential-jerk", 3, h_j, m.max_jerk_mm_s3)):
+    for name, order, h, limit in (("tangential-acc", 2, h_a, lim.acc_mm_s2),
+                                  ("tangential-jerk", 3, h_j, lim.jerk_mm_s3)):
         idx = stencils(tg, order, h)
         value, noise = derivative_estimate(tg, s, e, idx)
         findings.measure(name, np.abs(value), limit, noise * (1.0 + NUMERIC_REL_TOL),
-                         pl[idx[:, 1]], scale)
+                         pl[idx[:, 1]])
 
     # speed at each point: mean over its neighbours (one-sided at the ends)
     before = np.concatenate([[0], np.arange(ug.size - 1)])
@@ -259,24 +267,24 @@ def _check_arc_kinematics(curve: NurbsCurve, m: Machine, ug: np.ndarray, tg: np.
     span_s = tg[after] - tg[before]
     v = np.abs(s[after] - s[before]) / span_s
     skew = np.abs(tg[after] + tg[before] - 2.0 * tg)
-    e_v = ((e[after] + e[before]) / span_s + m.max_jerk_mm_s3 * span_s**2 / 24.0
-           + m.max_acc_mm_s2 * skew / 2.0)
+    e_v = ((e[after] + e[before]) / span_s + lim.jerk_mm_s3 * span_s**2 / 24.0
+           + lim.acc_mm_s2 * skew / 2.0)
     du = e / np.maximum(curve.speed(ug), 1e-300)
     k_low = np.minimum(kappa, np.minimum(curvature_1_mm(curve, np.maximum(ug - du, curve.u_min)),
                                          curvature_1_mm(curve, np.minimum(ug + du, curve.u_max))))
-    for name, power, limit in (("normal-acc", 2, m.max_normal_acc_mm_s2),
-                               ("normal-jerk", 3, m.max_normal_jerk_mm_s3)):
+    for name, power, limit in (("normal-acc", 2, lim.normal_acc_mm_s2),
+                               ("normal-jerk", 3, lim.normal_jerk_mm_s3)):
         kk = k_low ** (power - 1)
         value = v**power * kk
         allowance = ((v + e_v) ** power - v**power) * kk * (1.0 + NUMERIC_REL_TOL)
         informative = allowance <= limit  # elsewhere the vector estimate stands in
         findings.measure(name, value[informative], limit, allowance[informative],
-                         pl[informative], scale)
+                         pl[informative])
 
 
-def _check_xyz_kinematics(curve: NurbsCurve, m: Machine, pos: np.ndarray, t_s: np.ndarray,
+def _check_xyz_kinematics(curve: NurbsCurve, lim: Limits, pos: np.ndarray, t_s: np.ndarray,
                           u: np.ndarray, point_lines: np.ndarray, r: float, acc_total: float,
-                          h_x: float, findings: Findings, scale: float) -> None:
+                          h_x: float, findings: Findings) -> None:
     """Acceleration vectors from the written points (N, 3): total, corner, split on the
     tangent, and reversals."""
     idx = stencils(t_s, 2, h_x)
@@ -288,17 +296,17 @@ def _check_xyz_kinematics(curve: NurbsCurve, m: Machine, pos: np.ndarray, t_s: n
     size = np.linalg.norm(acc, axis=1)
     tangent, theta = turning_rad(curve, u[idx[:, 0]], u[idx[:, 1]], u[idx[:, 2]])
     corner = theta > CORNER_TURN_RAD
-    findings.measure("acc-xyz", size[~corner], acc_total, noise[~corner], line[~corner], scale)
-    findings.measure("corner", size[corner], acc_total, noise[corner], line[corner], scale)
+    findings.measure("acc-xyz", size[~corner], acc_total, noise[~corner], line[~corner])
+    findings.measure("corner", size[corner], acc_total, noise[corner], line[corner])
 
     split = ~np.isnan(tangent[:, 0]) & ~corner  # at a corner the split says nothing more
     along = np.sum(acc[split] * tangent[split], axis=1)
     across = np.linalg.norm(acc[split] - along[:, None] * tangent[split], axis=1)
     sin_turn = np.sin(np.minimum(theta[split], 0.5 * np.pi))
-    findings.measure("tangential-acc-xyz", np.abs(along), m.max_acc_mm_s2,
-                     m.max_normal_acc_mm_s2 * sin_turn + noise[split], line[split], scale)
-    findings.measure("normal-acc-xyz", across, m.max_normal_acc_mm_s2,
-                     m.max_acc_mm_s2 * sin_turn + noise[split], line[split], scale)
+    findings.measure("tangential-acc-xyz", np.abs(along), lim.acc_mm_s2,
+                     lim.normal_acc_mm_s2 * sin_turn + noise[split], line[split])
+    findings.measure("normal-acc-xyz", across, lim.normal_acc_mm_s2,
+                     lim.acc_mm_s2 * sin_turn + noise[split], line[split])
 
     t = t_s[idx]
     d1, d2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 1]
@@ -308,7 +316,7 @@ def _check_xyz_kinematics(curve: NurbsCurve, m: Machine, pos: np.ndarray, t_s: n
     speed = np.maximum(np.linalg.norm(v1, axis=1), np.linalg.norm(v2, axis=1))
     findings.measure("reversal", speed[flip], acc_total * (t[flip, 2] - t[flip, 0]) / 2.0,
                      (2.0 * r / d1[flip] + 2.0 * r / d2[flip]) * (1.0 + NUMERIC_REL_TOL),
-                     line[flip], scale)
+                     line[flip])
 
 
 def _xyz(p: np.ndarray) -> str:

@@ -51,15 +51,10 @@ def body(line: str) -> str:
     return line.rstrip("\r\n")
 
 
-def round_written(x: np.ndarray, decimals: int) -> np.ndarray:
-    """Coordinates as the writer rounds them: half away from zero, at `decimals`."""
-    scale = 10.0**decimals
-    return np.sign(x) * np.floor(np.abs(x) * scale + 0.5) / scale
-
-
 def source_tokens(path: Path, text: str, machine: Machine, dialect: str
                   ) -> tuple[list[Token], list[CurveBlock], dict[int, list[str]]]:
-    """Source -> tokens, curve blocks, and the pass-through lines that follow each curve."""
+    """Source -> tokens, curve blocks (in mm), and the pass-through lines that follow each
+    curve."""
     tokens: list[Token] = []
     blocks: list[CurveBlock] = []
     following: dict[int, list[str]] = {}
@@ -72,7 +67,7 @@ def source_tokens(path: Path, text: str, machine: Machine, dialect: str
         else:
             tokens.append(("curve", len(blocks)))
             following[len(blocks)] = []
-            blocks.append(item)
+            blocks.append(item.in_mm())
     return tokens, blocks, following
 
 

@@ -153,14 +153,13 @@ class Findings:
         self.violations.append(Violation(check, f"{self.output}:{line}", message))
 
     def measure(self, check: str, value: np.ndarray | float, limit: np.ndarray | float,
-                allowance: np.ndarray | float, line: np.ndarray | int,
-                scale: float = 1.0) -> None:
-        """Record one check's values at points (all (M,)), in program units times `scale`."""
-        value = np.atleast_1d(np.asarray(value, dtype=float)) * scale
+                allowance: np.ndarray | float, line: np.ndarray | int) -> None:
+        """Record one check's values at points (all (M,)), in mm and s."""
+        value = np.atleast_1d(np.asarray(value, dtype=float))
         shape = value.shape
         self.arrays.setdefault(check, []).append(
-            (value, np.broadcast_to(np.asarray(limit, dtype=float) * scale, shape),
-             np.broadcast_to(np.asarray(allowance, dtype=float) * scale, shape),
+            (value, np.broadcast_to(np.asarray(limit, dtype=float), shape),
+             np.broadcast_to(np.asarray(allowance, dtype=float), shape),
              np.broadcast_to(np.asarray(line), shape)))
 
 
