@@ -15,6 +15,7 @@ from typing import Any, Iterator
 import numpy as np
 
 from nurbsfeed.errors import CurveError, InputError, Location
+from nurbsfeed.gcode.writer import format_number
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.program import CurveBlock, PassThrough, ProgramItem
 
@@ -149,13 +150,6 @@ def comment_safe(text: str) -> str:
                    for ch in text)
 
 
-def _fmt(value: float, decimals: int) -> str:
-    text = f"{value:.{decimals}f}".rstrip("0")
-    if text in ("-0.", "-"):
-        text = "0."
-    return text
-
-
 def json_program(path: Path, text: str, decimals: int = 4) -> Iterator[ProgramItem]:
     """The JSON file as a program stream: header lines, then per curve a G0 and the curve."""
     text = text.removeprefix("\ufeff")
@@ -165,7 +159,7 @@ def json_program(path: Path, text: str, decimals: int = 4) -> Iterator[ProgramIt
     yield PassThrough(("G21" if units == "mm" else "G20") + " G90\n")
     for i, (curve, feed_mm_s) in enumerate(curves):
         start = curve.points[0]
-        yield PassThrough("G0 " + " ".join(f"{axis}{_fmt(v, decimals)}"
+        yield PassThrough("G0 " + " ".join(f"{axis}{format_number(v, decimals)}"
                                            for axis, v in zip("XYZ", start)) + "\n")
         yield CurveBlock(curve=curve, location=_key_location(text, str(path), "degree", i),
                          units=units,
