@@ -8,7 +8,6 @@ stepping loop and the writer compute with in finite numbers.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import re
 from dataclasses import dataclass

@@ -263,7 +263,8 @@ def _check_decimals(decimals: int) -> None:
 
 def written_decimals(decimals: int, units: str) -> int:
     """The coordinate decimals written in a program of `units` for a profile's `decimals`: one
-    more in inches, whose last digit (0.00001 in = 0.25 um) is then as fine as the mm one."""
+    more in inches, so that a last digit of 0.00001 in (0.254 um) is near the 0.1 um of
+    0.0001 mm rather than 25 times coarser."""
     return decimals + 1 if units == "in" else decimals
 
 
