@@ -2,7 +2,7 @@
 
 Units live in the key names and are what they say: mm and seconds, whatever the program's unit
 (an inch program's curves are converted to mm when they are read, `CurveBlock.in_mm`). Every key
-has a range (`RANGES`, README "Profile keys"): a value that passes is one the planner, the
+has a range (`RANGES`, README "Machine profile keys"): a value that passes is one the planner, the
 stepping loop and the writer compute with in finite numbers.
 """
 

@@ -82,3 +82,13 @@ def test_check_reads_an_inch_program_in_mm(tmp_path: Path) -> None:
     # the inch program's rounding, 0.5e-5 in per axis, in mm
     rounding_mm = reports["in"]["estimation"][0]["rounding_mm"]
     assert math.isclose(rounding_mm, 0.5e-5 * math.sqrt(3) * MM_PER_INCH)
+
+
+def test_plan_reports_an_inch_program_in_mm(tmp_path: Path) -> None:
+    inch_text, _ = convert(tmp_path, "in", 1.0)
+    result = CliRunner().invoke(main, ["plan", str(tmp_path / "in.json")])
+    assert result.exit_code == 0
+    planned_mm = float(re.search(r"length ([\d.]+) mm\n", result.stdout)[1])
+    inch_length = float(re.search(r"length ([\d.]+) in,", inch_text)[1])
+    assert math.isclose(planned_mm / MM_PER_INCH, inch_length, abs_tol=0.0005)
+    assert "segments (mm, mm/s)" in result.stdout and " in" not in result.stdout
