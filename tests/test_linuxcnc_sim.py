@@ -50,6 +50,18 @@ def test_a_machine_on_the_planned_points_measures_the_planned_cycle(program: Pat
     assert run.path_error_mm < 0.5e-3  # the written chords: δ = 1 µm, rounding 0.05 µm
 
 
+def test_a_machine_that_stops_mid_curve_measures_the_time_it_stood(program: Path) -> None:
+    """As when LinuxCNC's queue runs empty: 50 periods held halfway, then on as planned."""
+    positions = planned_positions(program, SERVO_PERIOD_S)
+    halfway = len(positions) // 2
+    held = np.vstack([positions[:halfway], np.repeat(positions[halfway - 1:halfway], 50, axis=0),
+                      positions[halfway:]])
+    [steady] = measure(SHORT_SAMPLE, program, positions)
+    [run] = measure(SHORT_SAMPLE, program, held)
+    assert (steady.standstill_periods, run.standstill_periods) == (0, 50)
+    assert run.measured_s - steady.measured_s == pytest.approx(50 * SERVO_PERIOD_S, rel=1e-9)
+
+
 def test_a_machine_beside_the_curve_measures_its_distance(program: Path) -> None:
     [run] = measure(SHORT_SAMPLE, program, planned_positions(program, SERVO_PERIOD_S, 5e-3))
     assert run.path_error_mm == pytest.approx(5e-3, abs=0.5e-3)
@@ -62,3 +74,10 @@ def test_the_simulated_machine_runs_a_converted_sample_on_its_curve(program: Pat
     assert run.path_error_mm <= 1e-3
     # F is computed from the written coordinates; LinuxCNC never runs a move faster than its F
     assert run.cycle_ratio >= 1.0 - 1e-3
+
+
+def test_without_linuxcnc_the_reason_names_what_is_missing(monkeypatch: pytest.MonkeyPatch,
+                                                           tmp_path: Path) -> None:
+    monkeypatch.setenv("PATH", str(tmp_path))
+    assert unavailable_reason() == ("LinuxCNC not installed (linuxcnc, halsampler not found; "
+                                    "apt-get install linuxcnc-uspace)")

@@ -9,7 +9,9 @@ per axis, the acceleration per axis under test) and its commanded positions reco
 servo period (tests/linuxcnc/run_sim.py). Per curve: measured / planned cycle (the machine's
 time between the ends of the first and the second-to-last move over the planned time; 1 = the
 planned feed) and the largest distance of a recorded position from the exact curve
-(tests/linuxcnc/measure.py). Needs LinuxCNC (linuxcnc-uspace); as root, the user 'lcnc'.
+(tests/linuxcnc/measure.py), and the servo periods in which the machine stood still mid-curve
+(its queue ran empty: LinuxCNC's task fills it in real time, and on a busy computer falls
+behind). Needs LinuxCNC (linuxcnc-uspace); as root, the user 'lcnc'.
 Measured here, never asserted in the test suite (a loaded machine can starve LinuxCNC's queue).
 """
 
@@ -20,7 +22,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from tests.linuxcnc.measure import measure
+from tests.linuxcnc.measure import MeasurementError, measure
 from tests.linuxcnc.programs import convert_for_linuxcnc, samples
 from tests.linuxcnc.run_sim import (
     ACCELERATIONS_MM_S2,
@@ -55,8 +57,9 @@ def main() -> None:
     if reason := unavailable_reason():
         sys.exit(f"cannot run LinuxCNC: {reason}")
     chosen = [s for s in samples() if not args.samples or s.name in args.samples]
-    print("| sample | curve | output | acc mm/s² | planned s | measured / planned | path µm |")
-    print("| --- | --- | --- | --- | --- | --- | --- |")
+    print("| sample | curve | output | acc mm/s² | planned s | measured / planned | path µm "
+          "| standstill periods |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
     with tempfile.TemporaryDirectory() as scratch:
         for output in args.output or DEFAULT_OUTPUTS:
             folder = Path(scratch) / output.replace(",", "_")
@@ -66,14 +69,15 @@ def main() -> None:
                 for acc_mm_s2 in args.acc or ACCELERATIONS_MM_S2:
                     try:
                         runs = measure(source, program, simulate(program, acc_mm_s2))
-                    except SimulationError as failure:
+                    except (SimulationError, MeasurementError) as failure:
                         print(f"| {source.name} | | {output} | {acc_mm_s2:g} | | FAILED: "
-                              f"{failure} | |", flush=True)
+                              f"{failure} | | |", flush=True)
                         continue
                     for index, run in enumerate(runs):
                         print(f"| {source.name} | {index} | {output} | {acc_mm_s2:g} | "
                               f"{run.planned_s:.3f} | {run.cycle_ratio:.4f} | "
-                              f"{run.path_error_mm * 1000:.3f} |", flush=True)
+                              f"{run.path_error_mm * 1000:.3f} | {run.standstill_periods} |",
+                              flush=True)
 
 
 if __name__ == "__main__":

@@ -31,11 +31,18 @@ PROJECTION_BACK_MM = 1e-3
 PROJECTION_ACCEPT_MM = 1e-4
 
 
+class MeasurementError(ValueError):
+    """The recorded positions do not run along the curve from its start to its end."""
+
+
 @dataclass(frozen=True)
 class CurveRun:
     planned_s: float  # between the ends of the first and the second-to-last written move
     measured_s: float  # the machine's time between the same two places
     path_error_mm: float  # farthest sample of that stretch from the exact curve
+    # servo periods in that stretch without motion: LinuxCNC's queue ran empty (its task did
+    # not keep up in real time) or a move ended in a full stop
+    standstill_periods: int
 
     @property
     def cycle_ratio(self) -> float:
@@ -43,7 +50,8 @@ class CurveRun:
 
 
 def curve_blocks(source: Path) -> list[CurveBlock]:
-    return [item for item in read_program(source, source.read_text()) if isinstance(item, CurveBlock)]
+    items = read_program(source, source.read_text())
+    return [item for item in items if isinstance(item, CurveBlock)]
 
 
 def measure(source: Path, program: Path, samples_mm: np.ndarray) -> list[CurveRun]:
@@ -72,7 +80,8 @@ def _measure_curve(block: CurveBlock, written: WrittenCurve, samples: np.ndarray
     arrived = np.nonzero(np.linalg.norm(samples[first_sample:] - start, axis=1) * scale
                          <= ARRIVAL_MM)[0]
     if len(arrived) == 0:
-        raise ValueError(f"the machine never reached the start of curve {block.location}")
+        raise MeasurementError(f"the machine never reached the start of the curve at "
+                               f"{block.location}")
     i = first_sample + arrived[0]
     k = 0
     sample_times, sample_index = [], []
@@ -100,9 +109,12 @@ def _measure_curve(block: CurveBlock, written: WrittenCurve, samples: np.ndarray
     _, distance = project_points(block.curve, samples[sample_index[inside]],
                                  PROJECTION_BACK_MM / scale, PROJECTION_ACCEPT_MM / scale,
                                  PROJECTION_BACK_MM / scale)
+    inside_samples = samples[sample_index[inside]]
+    standing = np.all(inside_samples[1:] == inside_samples[:-1], axis=1)
     run = CurveRun(planned_s=planned_to - planned_from,
                    measured_s=(measured_to - measured_from) * SERVO_PERIOD_S,
-                   path_error_mm=float(np.max(distance)) * scale)
+                   path_error_mm=float(np.max(distance)) * scale,
+                   standstill_periods=int(np.count_nonzero(standing)))
     return run, int(sample_index[-1]) + 1
 
 
@@ -110,7 +122,8 @@ def _crossing(sample_times: np.ndarray, sample_index: np.ndarray, planned_s: flo
     """The servo period (fractional) at which the machine first reached planned time planned_s."""
     after = int(np.argmax(sample_times >= planned_s))
     if sample_times[after] < planned_s:
-        raise ValueError("the machine never got there")
+        raise MeasurementError(f"the machine never reached the place planned at "
+                               f"{planned_s:.4f} s")
     before = max(after - 1, 0)
     span = sample_times[after] - sample_times[before]
     share = 0.0 if span <= 0.0 else (planned_s - sample_times[before]) / span

@@ -43,7 +43,8 @@ def unavailable_reason() -> str | None:
     """Why the simulation cannot run here, or None when it can."""
     missing = [tool for tool in ("linuxcnc", "halsampler") if shutil.which(tool) is None]
     if missing:
-        return f"LinuxCNC not installed ({', '.join(missing)} not found; apt-get install linuxcnc-uspace)"
+        return (f"LinuxCNC not installed ({', '.join(missing)} not found; "
+                "apt-get install linuxcnc-uspace)")
     if not Path("/usr/bin/python3").exists():
         return "/usr/bin/python3 not found (LinuxCNC's python module lives in its dist-packages)"
     if os.geteuid() == 0:

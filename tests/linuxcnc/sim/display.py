@@ -17,7 +17,7 @@ import linuxcnc
 
 PROGRAM_TIMEOUT_S = 600.0
 POLL_S = 0.01
-FIFO_DRAIN_S = 0.5
+FIFO_DRAIN_TIMEOUT_S = 60.0
 
 
 def wait_for(status, condition, what, timeout_s=30.0):
@@ -28,6 +28,18 @@ def wait_for(status, condition, what, timeout_s=30.0):
             return
         time.sleep(POLL_S)
     raise RuntimeError(f"timed out waiting for {what}")
+
+
+def stop_sampling():
+    """Stop recording and wait until halsampler has copied every recorded sample out of the
+    FIFO: on a busy computer it can lag behind by seconds."""
+    subprocess.run(["halcmd", "setp", "sampler.0.enable", "0"], check=True)
+    deadline = time.monotonic() + FIFO_DRAIN_TIMEOUT_S
+    while int(subprocess.run(["halcmd", "getp", "sampler.0.curr-depth"], check=True,
+                             capture_output=True, text=True).stdout) > 0:
+        if time.monotonic() > deadline:
+            raise RuntimeError("halsampler did not empty the sampler's FIFO")
+        time.sleep(POLL_S)
 
 
 def run(errors):
@@ -56,13 +68,14 @@ def run(errors):
                 message = error_channel.poll()
                 if message:
                     errors.append(message[1])
-                if status.interp_state == linuxcnc.INTERP_IDLE:
+                if (status.interp_state == linuxcnc.INTERP_IDLE and status.queue == 0
+                        and status.inpos):
                     break
                 if time.monotonic() > deadline:
                     errors.append("program did not finish")
                     break
                 time.sleep(POLL_S)
-            time.sleep(FIFO_DRAIN_S)
+            stop_sampling()
         finally:
             sampler.terminate()
             sampler.wait()
