@@ -73,19 +73,42 @@ def _measure_curve(block: CurveBlock, written: WrittenCurve, samples: np.ndarray
     # an axis not written since the curve comment holds the value it had at the curve start
     ends = np.where(np.isnan(written.ends), start, written.ends)
     vertices = np.vstack([start, ends])
-    moves = np.diff(vertices, axis=0)
-    lengths = np.linalg.norm(moves, axis=1)
+    lengths = np.linalg.norm(np.diff(vertices, axis=0), axis=1)
     times = np.concatenate([[0.0], np.cumsum(lengths / written.feeds_per_min * 60.0)])
 
     arrived = np.nonzero(np.linalg.norm(samples[first_sample:] - start, axis=1) * scale
                          <= ARRIVAL_MM)[0]
     if len(arrived) == 0:
-        raise MeasurementError(f"the machine never reached the start of the curve at "
+        raise MeasurementError("the machine never reached the start of the curve at "
                                f"{block.location}")
-    i = first_sample + arrived[0]
+    sample_times, sample_index = _walk(samples, first_sample + int(arrived[0]), vertices, times,
+                                       scale)
+    planned_from, planned_to = times[1], times[-2]
+    measured_from = _crossing(sample_times, sample_index, planned_from)
+    measured_to = _crossing(sample_times, sample_index, planned_to)
+    inside = (sample_times >= planned_from) & (sample_times <= planned_to)
+    inside_samples = samples[sample_index[inside]]
+    _, distance = project_points(block.curve, inside_samples, PROJECTION_BACK_MM / scale,
+                                 PROJECTION_ACCEPT_MM / scale, PROJECTION_BACK_MM / scale)
+    standing = np.all(inside_samples[1:] == inside_samples[:-1], axis=1)
+    run = CurveRun(planned_s=planned_to - planned_from,
+                   measured_s=(measured_to - measured_from) * SERVO_PERIOD_S,
+                   path_error_mm=float(np.max(distance)) * scale,
+                   standstill_periods=int(np.count_nonzero(standing)))
+    return run, int(sample_index[-1]) + 1
+
+
+def _walk(samples: np.ndarray, first: int, vertices: np.ndarray, times: np.ndarray,
+          scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """The planned time of each sample from `first` on, (K,), and the samples' indices, (K,):
+    the time of its nearest place on the written moves (vertices (M + 1, 3), passed at `times`),
+    looked for from the last sample's move on. Ends when the machine reaches the last vertex
+    or leaves the moves."""
+    moves = np.diff(vertices, axis=0)
+    lengths = np.linalg.norm(moves, axis=1)
     k = 0
     sample_times, sample_index = [], []
-    while i < len(samples):
+    for i in range(first, len(samples)):
         window = slice(k, min(k + WALK_WINDOW, len(moves)))
         offsets = samples[i] - vertices[window]
         fraction = np.clip(np.einsum("ij,ij->i", offsets, moves[window])
@@ -99,30 +122,14 @@ def _measure_curve(block: CurveBlock, written: WrittenCurve, samples: np.ndarray
         sample_index.append(i)
         if k == len(moves) - 1 and fraction[nearest] >= 1.0:
             break
-        i += 1
-    sample_times = np.array(sample_times)
-    sample_index = np.array(sample_index)
-    planned_from, planned_to = times[1], times[-2]
-    measured_from = _crossing(sample_times, sample_index, planned_from)
-    measured_to = _crossing(sample_times, sample_index, planned_to)
-    inside = (sample_times >= planned_from) & (sample_times <= planned_to)
-    _, distance = project_points(block.curve, samples[sample_index[inside]],
-                                 PROJECTION_BACK_MM / scale, PROJECTION_ACCEPT_MM / scale,
-                                 PROJECTION_BACK_MM / scale)
-    inside_samples = samples[sample_index[inside]]
-    standing = np.all(inside_samples[1:] == inside_samples[:-1], axis=1)
-    run = CurveRun(planned_s=planned_to - planned_from,
-                   measured_s=(measured_to - measured_from) * SERVO_PERIOD_S,
-                   path_error_mm=float(np.max(distance)) * scale,
-                   standstill_periods=int(np.count_nonzero(standing)))
-    return run, int(sample_index[-1]) + 1
+    return np.array(sample_times), np.array(sample_index)
 
 
 def _crossing(sample_times: np.ndarray, sample_index: np.ndarray, planned_s: float) -> float:
     """The servo period (fractional) at which the machine first reached planned time planned_s."""
     after = int(np.argmax(sample_times >= planned_s))
     if sample_times[after] < planned_s:
-        raise MeasurementError(f"the machine never reached the place planned at "
+        raise MeasurementError("the machine never reached the place planned at "
                                f"{planned_s:.4f} s")
     before = max(after - 1, 0)
     span = sample_times[after] - sample_times[before]
