@@ -1,0 +1,84 @@
+"""How a LinuxCNC machine runs nurbsfeed's output (issue 14), printed as a table:
+
+    python -m tests.bench.linuxcnc                         # every sample, 1000 and 5000 mm/s²
+    python -m tests.bench.linuxcnc butterfly.json --acc 1000 --output decimals=6,period_s=0.002
+
+Each sample is converted with the default profile (and an output variant's overrides), run end
+to end on the headless simulated mill of tests/linuxcnc/sim/ (1 ms servo period, 200 mm/s
+per axis, the acceleration per axis under test) and its commanded positions recorded every
+servo period (tests/linuxcnc/run_sim.py). Per curve: measured / planned cycle (the machine's
+time between the ends of the first and the second-to-last move over the planned time; 1 = the
+planned feed) and the largest distance of a recorded position from the exact curve
+(tests/linuxcnc/measure.py), and the servo periods in which the machine stood still mid-curve
+(its queue ran empty: LinuxCNC's task fills it in real time, and on a busy computer falls
+behind). Needs LinuxCNC (linuxcnc-uspace); as root, the user 'lcnc'.
+Measured here, never asserted in the test suite (a loaded machine can starve LinuxCNC's queue).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+from pathlib import Path
+
+from tests.linuxcnc.measure import MeasurementError, measure
+from tests.linuxcnc.programs import convert_for_linuxcnc, samples
+from tests.linuxcnc.run_sim import (
+    ACCELERATIONS_MM_S2,
+    SimulationError,
+    simulate,
+    unavailable_reason,
+)
+
+DEFAULT_OUTPUTS = ("default", "decimals=6")
+
+
+def output_overrides(spec: str) -> dict[str, float | int]:
+    """'decimals=6,period_s=0.002' -> {'decimals': 6, 'period_s': 0.002}; 'default' -> {}."""
+    overrides: dict[str, float | int] = {}
+    for item in filter(None, spec.split(",")):
+        if item == "default":
+            continue
+        key, _, value = item.partition("=")
+        overrides[key] = int(value) if key in ("decimals", "feed_decimals") else float(value)
+    return overrides
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("samples", nargs="*", help="sample file names (default: all)")
+    parser.add_argument("--acc", type=float, action="append",
+                        help="machine acceleration per axis, mm/s² (default: 1000 and 5000)")
+    parser.add_argument("--output", action="append",
+                        help="profile overrides of an output variant, e.g. decimals=6 "
+                             "(default: the default profile, and decimals=6)")
+    args = parser.parse_args()
+    if reason := unavailable_reason():
+        sys.exit(f"cannot run LinuxCNC: {reason}")
+    chosen = [s for s in samples() if not args.samples or s.name in args.samples]
+    print("| sample | curve | output | acc mm/s² | planned s | measured / planned | path µm "
+          "| standstill periods |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+    with tempfile.TemporaryDirectory() as scratch:
+        for output in args.output or DEFAULT_OUTPUTS:
+            folder = Path(scratch) / output.replace(",", "_")
+            folder.mkdir()
+            for source in chosen:
+                program = convert_for_linuxcnc(source, folder, output_overrides(output))
+                for acc_mm_s2 in args.acc or ACCELERATIONS_MM_S2:
+                    try:
+                        runs = measure(source, program, simulate(program, acc_mm_s2))
+                    except (SimulationError, MeasurementError) as failure:
+                        print(f"| {source.name} | | {output} | {acc_mm_s2:g} | | FAILED: "
+                              f"{failure} | | |", flush=True)
+                        continue
+                    for index, run in enumerate(runs):
+                        print(f"| {source.name} | {index} | {output} | {acc_mm_s2:g} | "
+                              f"{run.planned_s:.3f} | {run.cycle_ratio:.4f} | "
+                              f"{run.path_error_mm * 1000:.3f} | {run.standstill_periods} |",
+                              flush=True)
+
+
+if __name__ == "__main__":
+    main()
