@@ -21,7 +21,7 @@ from click.testing import CliRunner
 import nurbsfeed.pipeline
 from nurbsfeed.cli import main
 from nurbsfeed.errors import InputError, Interrupted
-from nurbsfeed.pipeline import atomic_output, output_target
+from nurbsfeed.files import atomic_output, output_target
 from tests.bench.programs import json_program
 from tests.conftest import SAMPLES
 

@@ -85,9 +85,9 @@ def test_small_chunks_write_the_same_program_and_trace_as_one_chunk(
 
 
 def json_items(path: Path):
-    from nurbsfeed.pipeline import read_program, read_text
+    from nurbsfeed.readers import read_program
 
-    return list(read_program(path, read_text(path), "auto", 4))
+    return list(read_program(path))
 
 
 def test_in_memory_interpolation_is_the_streamed_one(monkeypatch: pytest.MonkeyPatch,

@@ -350,6 +350,12 @@ def format_number(value: float, decimals: int) -> str:
     return buf[1:used].tobytes().decode("ascii").split(" ")[0]
 
 
+def rapid_line(point: np.ndarray, decimals: int) -> str:
+    """A G0 to `point` (3,), its numbers as the moves write theirs."""
+    return "G0 " + " ".join(f"{axis}{format_number(value, decimals)}"
+                            for axis, value in zip("XYZ", point))
+
+
 def cycle_comment(curve_index: int, name: str, n_points: int, period_s: float, method: str,
                   cycle_s: float, length_mm: float, units: str) -> str:
     """The comment line written before each replaced block (no parentheses inside)."""

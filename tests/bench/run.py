@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from nurbsfeed.interpolate import METHODS, SLOW_SPEED_REL, step_spans
-from nurbsfeed.json_reader import read_json_curves
+from nurbsfeed.readers.json_curves import read_json_curves
 from nurbsfeed.machine import load_machine
 from nurbsfeed.planning.limits import Limits
 from nurbsfeed.planning.planner import plan_curve
@@ -42,8 +42,7 @@ END_TO_END_RUNS = 5  # the machine is shared: report the median and the range
 
 
 def kernel_us_per_step() -> dict[str, float]:
-    text = (ROOT / "samples" / "butterfly.json").read_text()
-    _, [(curve, _)] = read_json_curves(ROOT / "samples" / "butterfly.json", text)
+    _, [(curve, _)] = read_json_curves(ROOT / "samples" / "butterfly.json")
     plan = plan_curve(curve, Limits.from_machine(load_machine("paper-table1")))
     law = plan.law
     t = np.arange(plan.n_periods + 1) * (law.duration_s / plan.n_periods)
