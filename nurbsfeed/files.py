@@ -5,8 +5,8 @@ Input is decoded as UTF-8 with surrogateescape: a byte that is not UTF-8 becomes
 surrogate and is encoded back to the same byte, so a pass-through line is copied exactly. A line
 keeps its ending ("\\n" or "\\r\\n"; a lone "\\r" inside a line is part of it). A file whose lines
 all end in "\\r" alone (classic Mac OS) would read as one line and convert nothing, so "\\r" ends
-the lines of a file whose first LOOK_AHEAD_BYTES (one read, for a pipe) hold a "\\r" and no
-"\\n"; a "\\n" that follows in such a file is refused rather than guessed at.
+the lines of a file whose first LOOK_AHEAD_BYTES hold a "\\r" and no "\\n"; a "\\n" that follows
+in such a file is refused rather than guessed at.
 
 Output goes to a temporary file beside the target and is renamed into place only when the whole
 conversion succeeded (a device or FIFO is written into from a temporary file at the end, never
@@ -20,6 +20,7 @@ import io
 import os
 import re
 import shutil
+import signal
 import stat
 import tempfile
 from pathlib import Path
@@ -30,7 +31,7 @@ from nurbsfeed.errors import InputError, Location
 ENCODING = "utf-8"
 ERRORS = "surrogateescape"  # any byte sequence round-trips unchanged
 BOM = "\ufeff"
-LOOK_AHEAD_BYTES = 1 << 20  # what decides the line ending and JSON or G-code; also the buffer
+LOOK_AHEAD_BYTES = 1 << 20  # what decides the line ending, and JSON or G-code
 
 
 class InputFile:
@@ -122,6 +123,7 @@ _CREATE_MODE = _umask_mode()
 # Names of an open descriptor (Linux, BSD): whatever file is behind them belongs to the shell's
 # redirection, so it is written into, never replaced (`-o /dev/stdout >> log` must append).
 _DESCRIPTOR_PATH = re.compile(r"/dev/(stdout|stderr|fd/\d+)|/proc/(self|thread-self|\d+)/fd/\d+")
+_STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
 _KIND_NAMES = {stat.S_IFDIR: "a directory", stat.S_IFBLK: "a block device",
                stat.S_IFSOCK: "a socket"}
 
@@ -168,10 +170,17 @@ def atomic_output(path: Path | None) -> Iterator[BinaryIO]:
     """
     final, through = output_target(path) if path is not None else (None, False)
     folder = final.parent if final is not None and not through else None
-    handle = tempfile.NamedTemporaryFile(
-        "w+b", dir=folder, prefix=f".{final.name}." if folder else "nurbsfeed.", suffix=".part",
-        delete=False)
+    # A stop signal (cli turns it into an exception) between creating the file and holding its
+    # name would leave it behind: held until the cleanup below knows the name.
+    handle = None
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
     try:
+        try:
+            handle = tempfile.NamedTemporaryFile(
+                "w+b", dir=folder, prefix=f".{final.name}." if folder else "nurbsfeed.",
+                suffix=".part", delete=False)
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, held)
         with handle:
             yield handle
             handle.flush()
@@ -190,6 +199,7 @@ def atomic_output(path: Path | None) -> Iterator[BinaryIO]:
         else:
             os.unlink(handle.name)
     except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(handle.name)
+        if handle is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(handle.name)
         raise
