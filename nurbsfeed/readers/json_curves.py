@@ -70,6 +70,7 @@ class _JsonText:
         self.pos = 0  # the next character to read, in the window
         self.line = 1  # the line of window[0] ...
         self.col0 = 0  # ... and its 0-based column
+        self.counted = (0, 0)  # (a window index, the newlines before it): locations go forward
         self.undecoded = b""  # the start of a character a piece ended in
         self.ended = False
         self.started = False
@@ -115,12 +116,16 @@ class _JsonText:
             self.col0 += self.pos
         self.window = self.window[self.pos:]
         self.pos = 0
+        self.counted = (0, 0)
 
     def location(self, at: int) -> Location:
         """FILE:LINE:COL of window[at]."""
         newline = self.window.rfind("\n", 0, at)
         col = at - newline if newline >= 0 else self.col0 + at + 1
-        return Location(self.path, self.line + self.window.count("\n", 0, at), col)
+        since, newlines = self.counted if self.counted[0] <= at else (0, 0)
+        newlines += self.window.count("\n", since, at)
+        self.counted = (at, newlines)
+        return Location(self.path, self.line + newlines, col)
 
     # ---- reading ----------------------------------------------------------------------------
     def next_char(self) -> str:
