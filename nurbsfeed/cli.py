@@ -26,6 +26,7 @@ from nurbsfeed.errors import (EXIT_BAD_INPUT, EXIT_BROKEN_PIPE, EXIT_SIGNAL_BASE
                               Interrupted, Location, NurbsfeedError)
 from nurbsfeed.interpolate import METHODS
 from nurbsfeed.machine import FLOAT_KEYS, INT_KEYS, Machine, load_machine
+from nurbsfeed.readers import DIALECTS, read_program
 
 TAYLOR1_WARNING = ("nurbsfeed: warning: taylor1 is the paper's first-order baseline; its points "
                    "drift off the planned feed by up to a few percent, which can break the "
@@ -118,7 +119,7 @@ def machine_from(kwargs: dict[str, Any]) -> Machine:
 
 method_option = click.option("--method", type=click.Choice(list(METHODS)), default="rk2c",
                              show_default=True, help="Interpolator (docs/design.md §3).")
-dialect_option = click.option("--dialect", type=click.Choice(["auto", "fanuc", "linuxcnc"]),
+dialect_option = click.option("--dialect", type=click.Choice(list(DIALECTS)),
                               default="auto", show_default=True,
                               help="G-code dialect of the input.")
 
@@ -450,15 +451,14 @@ def _print_summary(results: list[dict[str, Any]]) -> None:
 def plan(input: Path, dialect: str, **kwargs: Any) -> None:
     """Key points, nominal and scanned speeds, segments and cycle time of every curve."""
     from nurbsfeed.analysis import time_optimal_bound_s
-    from nurbsfeed.pipeline import plan_block, read_program, read_text
+    from nurbsfeed.pipeline import plan_block
     from nurbsfeed.planning.planner import KIND_NAMES
     from nurbsfeed.planning.scurve import transition_distance_mm
     from nurbsfeed.program import CurveBlock
 
     machine = machine_from(kwargs)
-    text = read_text(input)
     index = 0
-    for item in read_program(input, text, dialect, machine.decimals):
+    for item in read_program(input, dialect):
         if not isinstance(item, CurveBlock):
             continue
         item = item.in_mm()
@@ -569,7 +569,7 @@ def plot(input: Path, output: Path, curve_index: int, method: str, dialect: str,
         sys.exit(EXIT_BAD_INPUT)
     from nurbsfeed.analysis import curve_run, run_series
 
-    from nurbsfeed.pipeline import output_target
+    from nurbsfeed.files import output_target
 
     if _file_id(output) is not None and _same_file(input, output):
         raise InputError(f"-o would overwrite the input {input}", Location(str(output)))

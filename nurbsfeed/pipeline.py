@@ -1,22 +1,17 @@
 """read -> plan -> interpolate -> write for one input file. No printing: callers get reports.
 
-The program is streamed item by item: pass-through lines are copied as bytes, each curve block
-is planned, then stepped and written as G1 moves chunk by chunk before the next item is read, so
-memory holds one chunk of one curve at a time whatever the output size or the curve's duration.
-Output files are written to a temporary file beside the target and renamed into place only when
-the whole conversion succeeded (a device or FIFO is written into from a temporary file at the end,
-never replaced).
+The program is streamed item by item: the reader (readers/) reads the input as the items are
+taken, pass-through lines are copied as bytes, each curve block is planned, then stepped and
+written as G1 moves chunk by chunk before the next item is read, so memory holds one chunk of one
+curve at a time whatever the input size, the output size or the curve's duration. The output
+reaches its file only if the whole conversion succeeded (files.atomic_output).
 """
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
-import os
-import re
 import shutil
-import stat
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO, Callable, Iterator
@@ -24,17 +19,16 @@ from typing import BinaryIO, Callable, Iterator
 import numpy as np
 
 from nurbsfeed.errors import CurveError, InputError, Location
-from nurbsfeed.gcode.writer import MoveWriter, cycle_comment
+from nurbsfeed.files import ENCODING, ERRORS, atomic_output
+from nurbsfeed.gcode.writer import MoveWriter, cycle_comment, rapid_line
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.interpolate import PointChunk, Stepping
-from nurbsfeed.json_reader import json_program
 from nurbsfeed.machine import Machine
 from nurbsfeed.planning.planner import Plan, plan_curve
 from nurbsfeed.program import CurveBlock, PassThrough, ProgramItem
+from nurbsfeed.readers import read_program
 from nurbsfeed.safety import MotionGuard, feed_cap_mm_s
 
-ENCODING = "utf-8"
-ERRORS = "surrogateescape"  # any byte sequence round-trips unchanged
 TRACE_HEADER = "curve,k,t,u,s,v,a,j,x,y,z\n"
 TRACE_ROW = ",".join(["%d", "%d"] + ["%.17g"] * 9) + "\n"
 
@@ -67,25 +61,6 @@ class FileReport:
     @property
     def cycle_time_s(self) -> float:
         return sum(c.cycle_time_s for c in self.curves)
-
-
-def read_text(path: Path) -> str:
-    """The file as text that round-trips byte for byte (line endings kept)."""
-    try:
-        with open(path, encoding=ENCODING, errors=ERRORS, newline="") as handle:
-            return handle.read()
-    except OSError as exc:
-        raise InputError(f"cannot read input ({exc.strerror})", Location(str(path))) from None
-
-
-def read_program(path: Path, text: str, dialect: str = "auto",
-                 decimals: int = 4) -> Iterator[ProgramItem]:
-    """JSON curves or a G-code program, as a stream of items."""
-    if path.suffix.lower() == ".json" or text.lstrip().startswith("{"):
-        return json_program(path, text, decimals)
-    from nurbsfeed.gcode.reader import read_gcode
-
-    return read_gcode(path, text, dialect)
 
 
 def plan_block(block: CurveBlock, machine: Machine) -> Plan:
@@ -156,6 +131,9 @@ def convert_block(block: CurveBlock, index: int, out: BinaryIO, machine: Machine
     guard = MotionGuard(dataclasses.replace(plan.limits,
                                             feed_mm_s=feed_cap_mm_s(plan.limits, block)), label)
     eol = block.eol.encode("ascii")
+    if block.rapid_to_start:
+        out.write(rapid_line(block.curve.points[0], machine.decimals, block.units).encode("ascii")
+                  + eol)
     out.write(cycle_comment(index, block.curve.name, n_points, period_s, method,
                             plan.cycle_time_s, plan.length_mm,
                             block.units).encode(ENCODING, ERRORS) + eol)
@@ -190,98 +168,13 @@ def convert_block(block: CurveBlock, index: int, out: BinaryIO, machine: Machine
                        plan.length_mm, plan.cycle_time_s, block.units)
 
 
-def _umask_mode() -> int:
-    """0666 less the process umask: the mode `open()` would give a new file."""
-    mask = os.umask(0)
-    os.umask(mask)
-    return 0o666 & ~mask
-
-
-_CREATE_MODE = _umask_mode()
-# Names of an open descriptor (Linux, BSD): whatever file is behind them belongs to the shell's
-# redirection, so it is written into, never replaced (`-o /dev/stdout >> log` must append).
-_DESCRIPTOR_PATH = re.compile(r"/dev/(stdout|stderr|fd/\d+)|/proc/(self|thread-self|\d+)/fd/\d+")
-_KIND_NAMES = {stat.S_IFDIR: "a directory", stat.S_IFBLK: "a block device",
-               stat.S_IFSOCK: "a socket"}
-
-
-def output_target(path: Path) -> tuple[Path, bool]:
-    """Where output named `path` goes, and whether it is written through rather than replaced.
-
-    A new name or a regular file is replaced atomically (temporary file + rename); behind a
-    symbolic link, the file it points to is (the link stays). A character device (/dev/null, a
-    terminal), a FIFO or a descriptor's name (/dev/stdout) is opened and written, never replaced.
-    Anything else (a directory, a block device, a socket, a link to nothing) is refused: nurbsfeed
-    never replaces a file that is not a regular file.
-    """
-    where = Location(str(path))
-    try:
-        mode = os.stat(path).st_mode
-    except FileNotFoundError:
-        if os.path.islink(path):
-            raise InputError(f"cannot write output: a symbolic link to {os.readlink(path)}, "
-                             "which does not exist", where) from None
-        if not path.parent.is_dir():
-            raise InputError(f"cannot write output: directory {path.parent} does not exist",
-                             where) from None
-        return path, False
-    except OSError as exc:
-        raise InputError(f"cannot write output ({exc.strerror})", where) from None
-    if (stat.S_ISCHR(mode) or stat.S_ISFIFO(mode)
-            or _DESCRIPTOR_PATH.fullmatch(os.path.abspath(path))):
-        return path, True
-    if stat.S_ISREG(mode):
-        return Path(os.path.realpath(path)), False
-    kind = _KIND_NAMES.get(stat.S_IFMT(mode), "not a regular file")
-    raise InputError(f"cannot write output: it is {kind} (nurbsfeed writes regular files, "
-                     "character devices and FIFOs)", where)
-
-
-@contextlib.contextmanager
-def atomic_output(path: Path | None) -> Iterator[BinaryIO]:
-    """A binary stream whose content reaches `path` only if the block completes.
-
-    Always a temporary file first, removed on every way out (an error, an exception from a
-    signal): renamed onto `path` (see `output_target`), or copied into it when `path` is written
-    through; None: the caller copies it out (stdout). A failure never leaves partial output.
-    """
-    final, through = output_target(path) if path is not None else (None, False)
-    folder = final.parent if final is not None and not through else None
-    handle = tempfile.NamedTemporaryFile(
-        "w+b", dir=folder, prefix=f".{final.name}." if folder else "nurbsfeed.", suffix=".part",
-        delete=False)
-    try:
-        with handle:
-            yield handle
-            handle.flush()
-            if through:
-                handle.seek(0)
-                with open(os.open(final, os.O_WRONLY | os.O_APPEND), "ab") as sink:
-                    shutil.copyfileobj(handle, sink, 1 << 20)
-            elif final is not None:
-                os.fsync(handle.fileno())
-        if folder is not None:
-            if os.path.lexists(final) and not stat.S_ISREG(os.lstat(final).st_mode):
-                raise InputError("cannot write output: it is no longer a regular file",
-                                 Location(str(path)))  # swapped since output_target looked
-            os.chmod(handle.name, _CREATE_MODE)  # a temp file is 0600; a new file is not
-            os.replace(handle.name, final)
-        else:
-            os.unlink(handle.name)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(handle.name)
-        raise
-
-
 def convert_file(source: Path, target: Path | None, machine: Machine, method: str = "rk2c",
                  dialect: str = "auto", trace_path: Path | None = None,
                  stdout: BinaryIO | None = None,
                  on_curve: Callable[[CurveResult], None] | None = None) -> FileReport:
     """Convert `source` into `target` (or, when target is None, onto `stdout` at the end)."""
-    text = read_text(source)
     report = FileReport(str(source))
-    items = read_program(source, text, dialect, machine.decimals)
+    items = read_program(source, dialect)
     writing: str | None = str(target or "-")  # which output an OSError is about; None: stdout
     try:
         with atomic_output(target) as out:

@@ -44,6 +44,8 @@ class CurveBlock:
     units: str = "mm"  # "mm" (G21) or "in" (G20)
     eol: str = "\n"  # line ending for the lines written in place of the block
     incremental: bool = False  # G91 in effect: the moves are bracketed by G90 ... G91
+    rapid_to_start: bool = False  # a G0 to the first control point comes first (JSON curves:
+    # nothing in the input moves the tool there)
     feed_word_after: str | None = None  # F word to restore after the moves, e.g. "F1200."
     # (always with a decimal point: it is written by us)
     feed_u: np.ndarray = field(default_factory=lambda: np.empty(0))

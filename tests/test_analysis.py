@@ -71,7 +71,7 @@ def test_compare_on_the_butterfly_matches_an_independent_computation_and_the_pap
     table = compare_file(SAMPLES / "butterfly.json", machine, "auto", repeat=3)
     rows = {r.method: r for r in table.rows}
     assert list(rows) == list(METHODS) and table.n_curves == 1
-    plan = plan_block(curve_blocks(SAMPLES / "butterfly.json", machine)[0], machine)
+    plan = plan_block(curve_blocks(SAMPLES / "butterfly.json")[0], machine)
     for method, row in rows.items():
         result = interpolate(plan, method)
         ff = _independent_ff(plan.curve, result)
@@ -89,7 +89,7 @@ def test_compare_aggregates_curves_max_of_max_and_step_weighted_mean(two_curves)
     machine = load_machine("paper-table1")
     table = compare_file(source, machine, "auto", repeat=1)
     assert table.n_curves == 2 and table.as_dict()["aggregate"].startswith("max: largest")
-    plans = [plan_block(b, machine) for b in curve_blocks(source, machine)]
+    plans = [plan_block(b, machine) for b in curve_blocks(source)]
     for row in table.rows:
         ffs = [_independent_ff(p.curve, interpolate(p, row.method)) for p in plans]
         assert row.max_ff_pct == pytest.approx(100 * max(f.max() for f in ffs), rel=1e-3)
@@ -102,7 +102,7 @@ def test_compare_aggregates_curves_max_of_max_and_step_weighted_mean(two_curves)
 
 def test_projection_recovers_the_parameters_of_points_on_a_self_crossing_curve() -> None:
     machine = load_machine("paper-table1")
-    plan = plan_block(curve_blocks(SAMPLES / "butterfly.json", machine)[0], machine)
+    plan = plan_block(curve_blocks(SAMPLES / "butterfly.json")[0], machine)
     result = interpolate(plan)
     u, dist = project_points(plan.curve, result.points, 1e-4, 1e-9, 1e-2)
     assert np.max(dist) < 1e-9

@@ -18,7 +18,7 @@ from click.testing import CliRunner
 
 from nurbsfeed.cli import main
 from nurbsfeed.jit import JIT_ENABLED
-from nurbsfeed.json_reader import read_json_curves
+from nurbsfeed.readers.json_curves import read_json_curves
 from tests.conftest import ROOT, SAMPLES
 from tests.gcode_parse import moves
 
@@ -392,7 +392,7 @@ def test_conversions_at_the_envelope_edges_write_points_on_the_curve(tmp_path: P
     src.write_text(json.dumps(EDGE_CURVES[name]))
     code, _, stderr = run("convert", str(src), "-o", str(out), "--trace", str(trace), "-q")
     assert code == 0, stderr
-    curve = read_json_curves(src, src.read_text())[1][0][0]
+    curve = read_json_curves(src)[1][0][0]
     table = np.loadtxt(trace, delimiter=",", skiprows=1)
     u_input, points = table[:, 3], table[:, 8:11]
     assert u_input[0] == curve.u_origin and np.all(np.diff(u_input) >= 0)

@@ -17,11 +17,14 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
+from hypothesis import given
+from hypothesis import strategies as st
 
 import nurbsfeed.pipeline
 from nurbsfeed.cli import main
 from nurbsfeed.errors import InputError, Interrupted
-from nurbsfeed.pipeline import atomic_output, output_target
+from nurbsfeed import files
+from nurbsfeed.files import InputFile, atomic_output, output_target
 from tests.bench.programs import json_program
 from tests.conftest import SAMPLES
 
@@ -328,3 +331,53 @@ def test_a_reader_that_goes_away_ends_the_run_quietly_with_141(tmp_path: Path,
     proc.stdout.close()
     _, stderr = proc.communicate(timeout=60)
     assert (proc.returncode, stderr) == (141, b"")
+
+
+# ---- input read as lines ----
+
+LINE_BYTES = st.lists(st.sampled_from([b"G1 X1\n", b"\r\n", b"\r", b"\n", b"\xe9", b"\xff\xfe",
+                                       "\u00e9\u20ac".encode(), b"\xef\xbb\xbf", b"%", b""]))
+
+
+@given(LINE_BYTES)
+def test_lines_give_back_every_byte_and_end_only_where_a_line_ends(pieces: list[bytes]) -> None:
+    content = b"".join(pieces)
+    lines = list(InputFile(Path("t.nc"), content).lines())
+    assert b"".join(line.encode("utf-8", "surrogateescape") for line in lines) == content
+    newline = "\r" if b"\n" not in content and b"\r" in content else "\n"
+    assert all(line.endswith(newline) for line in lines[:-1])
+    assert all(newline not in line[:-1] for line in lines)
+
+
+def test_a_file_of_cr_line_endings_reads_as_lines_and_a_later_lf_is_refused(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    assert list(InputFile(Path("t.nc"), b"G0 X1\rG1 X2\rM30").lines()) == [
+        "G0 X1\r", "G1 X2\r", "M30"]
+    # decided from the first LOOK_AHEAD_BYTES: a LF after them is not guessed at
+    monkeypatch.setattr(files, "LOOK_AHEAD_BYTES", 8)
+    lines = InputFile(Path("t.nc"), b"G0 X1\rG1 X2\rG1 X3\r\nM30\r").lines()
+    assert [next(lines), next(lines), next(lines)] == ["G0 X1\r", "G1 X2\r", "G1 X3\r"]
+    with pytest.raises(InputError) as caught:
+        next(lines)
+    assert str(caught.value) == ("t.nc:4:1: a line ending in LF in a file whose lines end in CR "
+                                 "alone (classic Mac OS): write every line ending the same way")
+
+
+def test_a_program_from_a_pipe_converts_like_the_file(tmp_path: Path) -> None:
+    """`nurbsfeed convert <(command)`: a pipe is read once, whole, however often it is read."""
+    for sample in (SAMPLES / "fanuc-quadratic.nc", QUARTER):
+        read_end, write_end = os.pipe()
+        writer = threading.Thread(target=lambda: (os.write(write_end, sample.read_bytes()),
+                                                  os.close(write_end)))
+        writer.start()
+        try:
+            piped = tmp_path / f"piped-{sample.name}.nc"
+            code, _, stderr = run("convert", f"/dev/fd/{read_end}", "-o", piped, "-q")
+        finally:
+            writer.join()
+            os.close(read_end)
+        assert (code, stderr) == (0, "")
+        direct = tmp_path / f"direct-{sample.name}.nc"
+        assert run("convert", sample, "-o", direct, "-q")[0] == 0
+        assert piped.read_bytes() == direct.read_bytes().replace(
+            sample.name.encode(), f"{read_end}".encode())

@@ -11,7 +11,8 @@ from click.testing import CliRunner
 
 from nurbsfeed.cli import main
 from nurbsfeed.errors import CurveError
-from nurbsfeed.gcode import read_gcode
+from nurbsfeed.files import InputFile
+from nurbsfeed.readers.gcode import read_gcode
 from nurbsfeed.program import CurveBlock, PassThrough
 from tests.conftest import SAMPLES
 
@@ -29,7 +30,7 @@ def convert(source: Path, tmp_path: Path) -> str:
 
 
 def read(text: str) -> list:
-    return list(read_gcode(Path("t.nc"), text, "auto"))
+    return list(read_gcode(Path("t.nc"), InputFile(Path("t.nc"), text.encode()).lines(), "auto"))
 
 
 @pytest.mark.parametrize(("name", "unset"), [("xy", "Z"), ("yz", "X"), ("zx", "Y")])

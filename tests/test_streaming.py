@@ -85,9 +85,9 @@ def test_small_chunks_write_the_same_program_and_trace_as_one_chunk(
 
 
 def json_items(path: Path):
-    from nurbsfeed.pipeline import read_program, read_text
+    from nurbsfeed.readers import read_program
 
-    return list(read_program(path, read_text(path), "auto", 4))
+    return list(read_program(path))
 
 
 def test_in_memory_interpolation_is_the_streamed_one(monkeypatch: pytest.MonkeyPatch,
@@ -224,3 +224,56 @@ def test_max_curve_time_is_optional_in_a_profile_and_an_hour_by_default(tmp_path
     assert load_machine(str(profile)).max_curve_time_s == 3600.0
     assert load_machine("default").max_curve_time_s == 3600.0
     assert load_machine("paper-table1", {"max_curve_time_s": 60}).max_curve_time_s == 60.0
+
+
+# ---- reading streams: memory does not grow with the number of input lines ----
+
+class MeteredLines:
+    """Program lines handed out one at a time, refusing any read past `allowed`."""
+
+    def __init__(self, lines: list[str]) -> None:
+        self.lines = lines
+        self.read = 0
+        self.allowed = 0
+
+    def __iter__(self) -> MeteredLines:
+        return self
+
+    def __next__(self) -> str:
+        if self.read == len(self.lines):
+            raise StopIteration
+        assert self.read < self.allowed, f"line {self.read + 1} read ahead of its item"
+        self.read += 1
+        return self.lines[self.read - 1]
+
+
+def test_the_gcode_reader_reads_a_line_only_when_its_item_is_wanted() -> None:
+    """A pass-through line is yielded before the next line is read; only inside a curve does the
+    reader look ahead, RUN_LINES at most. So the lines held never depend on the file's length."""
+    from nurbsfeed.gcode.point_lines import RUN_LINES
+    from nurbsfeed.program import PassThrough
+    from nurbsfeed.readers.gcode import read_gcode
+    from tests.bench.programs import fanuc_program
+
+    program = fanuc_program(1).splitlines(keepends=True)
+    head, curve, tail = program[:5], program[5:-4], program[-4:]  # curve: G06.2 .. closing K
+    filler = [f"(pass-through {i})\n" for i in range(2 * RUN_LINES)]
+    lines = head + filler + curve + filler + tail
+    first_curve_line = len(head + filler)
+    source = MeteredLines(lines)
+    stream = read_gcode(Path("t.nc"), source)
+    items = []
+    while True:
+        # the item being read is the next line's, or the whole curve plus the look-ahead
+        in_curve = first_curve_line <= source.read < first_curve_line + len(curve)
+        source.allowed = (first_curve_line + len(curve) + RUN_LINES if in_curve
+                          else source.read + 1)
+        item = next(stream, None)
+        if item is None:
+            break
+        items.append(item)
+        if isinstance(item, PassThrough) and source.read < first_curve_line:
+            assert source.read == len(items)  # the line yielded is the last line read
+    assert [type(i).__name__ for i in items].count("CurveBlock") == 1
+    assert "".join(i.text for i in items if isinstance(i, PassThrough)) == "".join(
+        head + filler + filler + tail)

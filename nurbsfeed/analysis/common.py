@@ -6,11 +6,10 @@ from pathlib import Path
 
 import numpy as np
 
-from nurbsfeed.machine import Machine
-from nurbsfeed.pipeline import read_program, read_text
 from nurbsfeed.planning.limits import speed_limit
 from nurbsfeed.planning.planner import Plan
 from nurbsfeed.program import CurveBlock
+from nurbsfeed.readers import read_program
 
 
 def time_optimal_bound_s(plan: Plan) -> float:
@@ -40,7 +39,6 @@ def time_optimal_bound_s(plan: Plan) -> float:
                                  2.0 * np.sqrt(ds / lim.acc_mm_s2))))
 
 
-def curve_blocks(path: Path, machine: Machine, dialect: str = "auto") -> list[CurveBlock]:
+def curve_blocks(path: Path, dialect: str = "auto") -> list[CurveBlock]:
     """The NURBS curves of an input file, in file order, in mm (`CurveBlock.in_mm`)."""
-    items = read_program(path, read_text(path), dialect, machine.decimals)
-    return [item.in_mm() for item in items if isinstance(item, CurveBlock)]
+    return [item.in_mm() for item in read_program(path, dialect) if isinstance(item, CurveBlock)]

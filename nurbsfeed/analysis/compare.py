@@ -87,7 +87,7 @@ def kernel_seconds(plan: Plan, result: Interpolation, repeat: int) -> float:
 
 def compare_file(path: Path, machine: Machine, dialect: str, repeat: int) -> Comparison:
     """Feed fluctuation and time per step of every interpolator on every curve of `path`."""
-    plans = [plan_block(block, machine) for block in curve_blocks(path, machine, dialect)]
+    plans = [plan_block(block, machine) for block in curve_blocks(path, dialect)]
     moving = [p for p in plans if p.n_periods > 0]
     rows = []
     for method in METHODS:

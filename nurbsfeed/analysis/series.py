@@ -59,7 +59,7 @@ def run_series(block: CurveBlock, plan: Plan, result: Interpolation) -> RunSerie
 def curve_run(path: Path, machine: Machine, method: str, dialect: str,
               index: int) -> tuple[CurveBlock, Plan, Interpolation]:
     """Plan and interpolate curve `index` (from 0, in file order) of `path`: what `plot` draws."""
-    blocks = curve_blocks(path, machine, dialect)
+    blocks = curve_blocks(path, dialect)
     if index >= len(blocks):
         raise InputError(f"there is no curve {index}: the input has {len(blocks)} NURBS curve(s), "
                          "numbered from 0", Location(str(path)))

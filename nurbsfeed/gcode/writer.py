@@ -362,9 +362,25 @@ def format_number(value: float, decimals: int) -> str:
     arithmetic is Python's, unbounded, so any finite value is written."""
     scaled = value * 10.0**decimals
     ticks = math.floor(abs(scaled) + 0.5)  # `_round_tick`
-    whole, fraction = divmod(ticks, 10**decimals)
+    return _format_ticks(-ticks if scaled < 0.0 else ticks, decimals)
+
+
+def _format_ticks(ticks: int, decimals: int) -> str:
+    """An integer count of 10^-decimals as written: a decimal point always, no trailing zeros,
+    never `-0.`."""
+    whole, fraction = divmod(abs(ticks), 10**decimals)
     digits = f"{fraction:0{decimals}d}".rstrip("0") if decimals else ""
-    return f"{'-' if scaled < 0.0 and ticks else ''}{whole}.{digits}"
+    return f"{'-' if ticks < 0 else ''}{whole}.{digits}"
+
+
+def rapid_line(point_mm: np.ndarray, decimals: int, units: str = "mm") -> str:
+    """A G0 to `point_mm` (3,) in the program's `units`, rounded as `MoveWriter` rounds the
+    start it is given (so the first move starts exactly where the G0 ends)."""
+    places = written_decimals(decimals, units)
+    ticks = round_ticks(np.asarray(point_mm, dtype=float)[None, :], places,
+                        1.0 / MM_PER_UNIT[units])[0]
+    return "G0 " + " ".join(f"{axis}{_format_ticks(int(tick), places)}"
+                            for axis, tick in zip("XYZ", ticks))
 
 
 def cycle_comment(curve_index: int, name: str, n_points: int, period_s: float, method: str,

@@ -13,6 +13,7 @@ feed drops and the limit-fixing rounds work. Each curve starts where the previou
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 
@@ -71,3 +72,29 @@ def fanuc_program(n_curves: int, seed: int = 1) -> str:
         lines.append("G01")
     lines += ["M5", "M30", "%"]
     return "\n".join(lines) + "\n"
+
+
+def write_pass_through_program(path: Path, size_mb: int, n_curves: int = 3,
+                               seed: int = 1) -> None:
+    """A program of `size_mb` MB that is nearly all lines nurbsfeed passes through (G1 moves
+    a straight-line post wrote), with `n_curves` of the G06.2 curves above spread through it:
+    the reading path alone, at a size where holding the file would show in the peak RSS.
+    Written in pieces, so that the generator holds none of it."""
+    curve_program = fanuc_program(n_curves, seed).splitlines(keepends=True)
+    head, tail = curve_program[:5], curve_program[-3:]
+    starts = [c["control_points"][0] for c in random_curves(n_curves, seed)]
+    curves = [f"G1 X{x:.4f} Y{y:.4f} Z{z:.4f}\n{curve}G01\n" for (x, y, z), curve
+              in zip(starts, "".join(curve_program[5:-3]).split("G01\n"))]
+    rng = np.random.default_rng(seed)
+    moves = "".join(f"G1 X{x:.4f} Y{y:.4f} Z{z:.4f} F1200.\n"
+                    for x, y, z in rng.uniform(-100.0, 100.0, (20_000, 3)))
+    block_bytes = len(moves.encode("ascii"))
+    n_blocks = max(1, size_mb * 1_000_000 // block_bytes)
+    with path.open("w", encoding="ascii", newline="") as handle:
+        handle.writelines(head)
+        for i in range(n_blocks):
+            handle.write(moves)
+            if curves and (i + 1) * len(curves) // n_blocks > i * len(curves) // n_blocks:
+                handle.write(curves.pop(0))
+        handle.writelines(curves)
+        handle.writelines(tail)

@@ -11,7 +11,10 @@
    writing included) of the median of END_TO_END_RUNS runs with the range over all of them, its
    wall time, and the highest peak RSS of the children,
    for two program sizes (memory must not grow with the output).
-3. Cold start: `nurbsfeed convert` of a small sample with a warm numba cache (median of 5).
+3. Reading: `nurbsfeed convert` of a program of PASS_THROUGH_MB MB of lines it passes through
+   and 3 curves (tests/bench/programs.py), once: its wall time and peak RSS, which must not grow
+   with the input (the reader streams).
+4. Cold start: `nurbsfeed convert` of a small sample with a warm numba cache (median of 5).
 Speed is measured here, never asserted in the test suite.
 """
 
@@ -30,19 +33,19 @@ from pathlib import Path
 import numpy as np
 
 from nurbsfeed.interpolate import METHODS, SLOW_SPEED_REL, step_spans
-from nurbsfeed.json_reader import read_json_curves
+from nurbsfeed.readers.json_curves import read_json_curves
 from nurbsfeed.machine import load_machine
 from nurbsfeed.planning.planner import plan_curve
-from tests.bench.programs import fanuc_program
+from tests.bench.programs import fanuc_program, write_pass_through_program
 
 ROOT = Path(__file__).resolve().parents[2]
 REPEATS = 30
 END_TO_END_RUNS = 5  # the machine is shared: report the median and the range
+PASS_THROUGH_MB = 200
 
 
 def kernel_us_per_step() -> dict[str, float]:
-    text = (ROOT / "samples" / "butterfly.json").read_text()
-    _, [(curve, _)] = read_json_curves(ROOT / "samples" / "butterfly.json", text)
+    _, [(curve, _)] = read_json_curves(ROOT / "samples" / "butterfly.json")
     plan = plan_curve(curve, load_machine("paper-table1").limits)
     law = plan.law
     t = np.arange(plan.n_periods + 1) * (law.duration_s / plan.n_periods)
@@ -118,6 +121,18 @@ def warm_up(folder: Path) -> None:
     run_convert([str(src), "-o", str(folder / "warm-up-out.nc"), "-q"])
 
 
+def pass_through(size_mb: int, folder: Path) -> dict[str, float]:
+    """One conversion of a size_mb program that is nearly all pass-through lines."""
+    src = folder / f"pass-through-{size_mb}.nc"
+    write_pass_through_program(src, size_mb)
+    out = folder / "pass-through-out.nc"
+    wall, rss_kib = run_convert([str(src), "-o", str(out), "-q"])
+    result = {"input_mb": src.stat().st_size / 1e6, "wall_s": wall, "rss_mb": rss_kib / 1024}
+    src.unlink()
+    out.unlink()
+    return result
+
+
 def cold_start(folder: Path) -> float:
     out = folder / "cold.nc"
     sample = str(ROOT / "samples" / "fanuc-quadratic.nc")
@@ -128,12 +143,14 @@ def cold_start(folder: Path) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small programs only")
-    sizes = (50, 100) if parser.parse_args().quick else (325, 650)
+    quick = parser.parse_args().quick
+    sizes = (50, 100) if quick else (325, 650)
     kernel = kernel_us_per_step()
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         warm_up(folder)
         runs = [end_to_end(n, folder) for n in sizes]
+        reading = pass_through(PASS_THROUGH_MB // 10 if quick else PASS_THROUGH_MB, folder)
         cold = cold_start(folder)
     print("| benchmark | result |")
     print("| --- | --- |")
@@ -144,6 +161,8 @@ def main() -> None:
               f"({r['output_mb']:.0f} MB out) | {r['points_per_s'] / 1e6:.2f} M points/s "
               f"({r['slowest'] / 1e6:.2f}-{r['fastest'] / 1e6:.2f} over {END_TO_END_RUNS} runs), "
               f"{r['wall_s']:.2f} s, peak RSS {r['rss_mb']:.0f} MB |")
+    print(f"| convert {reading['input_mb']:.0f} MB of pass-through lines and 3 curves | "
+          f"{reading['wall_s']:.1f} s, peak RSS {reading['rss_mb']:.0f} MB |")
     print(f"| cold start, convert fanuc-quadratic.nc (warm cache) | {cold:.2f} s |")
 
 

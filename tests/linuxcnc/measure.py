@@ -18,9 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from nurbsfeed.analysis.check.projection import project_points
-from nurbsfeed.machine import MM_PER_INCH
-from nurbsfeed.pipeline import read_program
-from nurbsfeed.program import CurveBlock
+from nurbsfeed.program import MM_PER_INCH, CurveBlock
+from nurbsfeed.readers import read_program
 from tests.linuxcnc.programs import WrittenCurve, written_curves
 from tests.linuxcnc.run_sim import SERVO_PERIOD_S
 
@@ -50,8 +49,8 @@ class CurveRun:
 
 
 def curve_blocks(source: Path) -> list[CurveBlock]:
-    items = read_program(source, source.read_text())
-    return [item for item in items if isinstance(item, CurveBlock)]
+    """The curves of `source` as read, in the program's unit (the written moves' unit)."""
+    return [item for item in read_program(source) if isinstance(item, CurveBlock)]
 
 
 def measure(source: Path, program: Path, samples_mm: np.ndarray) -> list[CurveRun]:

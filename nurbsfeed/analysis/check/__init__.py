@@ -29,7 +29,7 @@ from nurbsfeed.analysis.check.report import (
 )
 from nurbsfeed.analysis.check.structure import compare_structure
 from nurbsfeed.machine import Machine
-from nurbsfeed.pipeline import read_text
+from nurbsfeed.files import read_text
 
 __all__ = ["CHECKS", "CheckReport", "Violation", "check_files", "project_points", "render_check"]
 
@@ -37,7 +37,7 @@ __all__ = ["CHECKS", "CheckReport", "Violation", "check_files", "project_points"
 def check_files(source: Path, output: Path, machine: Machine,
                 dialect: str = "auto") -> CheckReport:
     """Check the converted program `output` against `source`."""
-    src_tokens, blocks, following = source_tokens(source, read_text(source), machine, dialect)
+    src_tokens, blocks, following = source_tokens(source, machine, dialect)
     out_lines = split_lines(read_text(output))
     findings = Findings(str(output))
     out_tokens, token_lines, sections = parse_output(out_lines, blocks, following, findings)

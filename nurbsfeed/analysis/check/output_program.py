@@ -11,9 +11,10 @@ from typing import Any
 import numpy as np
 
 from nurbsfeed.analysis.check.report import Findings
+from nurbsfeed.gcode.writer import rapid_line
 from nurbsfeed.machine import Machine
-from nurbsfeed.pipeline import read_program
 from nurbsfeed.program import CurveBlock, PassThrough
+from nurbsfeed.readers import read_program
 
 COMMENT_RE = re.compile(r"\(nurbsfeed: curve (\d+) (.*), (\d+) points, period ([0-9.eE+-]+) ms, "
                         r"(\w+), length ([0-9.]+) (mm|in), planned cycle ([0-9.]+) s\)$")
@@ -51,20 +52,22 @@ def body(line: str) -> str:
     return line.rstrip("\r\n")
 
 
-def source_tokens(path: Path, text: str, machine: Machine, dialect: str
+def source_tokens(path: Path, machine: Machine, dialect: str
                   ) -> tuple[list[Token], list[CurveBlock], dict[int, list[str]]]:
-    """Source -> tokens, curve blocks (in mm), and the pass-through lines that follow each
-    curve."""
+    """Source -> tokens, curve blocks (in mm), and the pass-through lines that follow each curve
+    (the G0 the writer puts before a JSON curve reads as one, in its place)."""
     tokens: list[Token] = []
     blocks: list[CurveBlock] = []
     following: dict[int, list[str]] = {}
-    for item in read_program(path, text, dialect, machine.decimals):
-        if isinstance(item, PassThrough):
-            for line in split_lines(item.text):
+    for item in read_program(path, dialect):
+        if isinstance(item, PassThrough) or item.rapid_to_start:
+            text = item.text if isinstance(item, PassThrough) else rapid_line(
+                item.in_mm().curve.points[0], machine.decimals, item.units) + item.eol
+            for line in split_lines(text):
                 tokens.append(("line", line))
                 if blocks:
                     following[len(blocks) - 1].append(line)
-        else:
+        if isinstance(item, CurveBlock):
             tokens.append(("curve", len(blocks)))
             following[len(blocks)] = []
             blocks.append(item.in_mm())

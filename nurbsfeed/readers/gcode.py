@@ -1,5 +1,10 @@
 """G-code program -> stream of PassThrough lines and CurveBlocks (program.py), line by line.
 
+The lines come from files.InputFile (decoded, endings kept) and are read as the items are taken:
+a pass-through line is yielded before the line after it is read, and only inside a G06.2 / G6.2
+curve does the reader look ahead, point_lines.RUN_LINES lines at most, for a run of control
+points.
+
 Call chain for one line: `tokenizer.tokenize_line` (for a plain "K_ X_ Y_ Z_ [R_]" line inside
 a G06.2 curve, `fanuc.NurbsCurveReader.take_line` reads the text directly instead, with the same
 result, and `take_run` reads a whole run of such lines at once in compiled code, point_lines.py;
@@ -15,43 +20,48 @@ Parameter assignments take effect after their line.
 Dialect dispatch. `fanuc`: G06.2 curves (a Q word is an error, G5.2 is refused). `linuxcnc`: G5.2
 blocks and G6.2 curves with LinuxCNC's rules. `auto`: G5.2 is LinuxCNC; G6.2 is LinuxCNC when its
 first block has a Q word, Fanuc otherwise; a curve that continues a modal G6.2 follows the rules
-of the curve before it.
+of the curve before it. Each curve is decided from what has been read up to its first block,
+never from lines after it.
 
-Besides the text (and, for `take_run`, one copy of it as ASCII codes), nothing is held but the
-modal state, the parameters and the NURBS block being read (its control points, not its lines:
-their line ending is all a CurveBlock keeps).
+Nothing is held but the modal state, the parameters, the lines looked ahead at (and, for
+`take_run`, one copy of them as ASCII codes) and the NURBS block being read (its control points,
+not its lines: their line ending is all a CurveBlock keeps): memory does not grow with the
+number of lines.
 """
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Iterator
 from pathlib import Path
 
 from nurbsfeed.errors import InputError, Location
+from nurbsfeed.files import BOM
 from nurbsfeed.gcode.fanuc import NurbsCurveReader
 from nurbsfeed.gcode.linuxcnc import G52BlockReader
 from nurbsfeed.gcode.modal import AXES, G5_2, G5_3, G6_2, NO_POSITION_EFFECT, ModalState
 from nurbsfeed.gcode.nurbs_block import FinishedCurve, first_word, motion_words
-from nurbsfeed.gcode.point_lines import ProgramCodes
+from nurbsfeed.gcode import point_lines
 from nurbsfeed.gcode.tokenizer import Block, Param, tokenize_line
 from nurbsfeed.program import CurveBlock, PassThrough, ProgramItem
 
 DIALECTS = ("auto", "fanuc", "linuxcnc")
-BOM = "\ufeff"
 
 
-def read_gcode(path: Path, text: str, dialect: str = "auto") -> Iterator[ProgramItem]:
-    """The program in `text` (read from `path`) as items in file order, streamed.
+def read_gcode(path: Path, lines: Iterator[str], dialect: str = "auto"
+               ) -> Iterator[ProgramItem]:
+    """The program whose `lines` (read from `path`, each with its ending, files.InputFile) are
+    given as items in file order, streamed (module docstring).
 
-    `text` keeps its line endings; the PassThrough texts and the lines the CurveBlocks stand for
-    concatenate to it exactly, except that the comment, blank and N-only lines inside a NURBS
-    block come (in order) right before its CurveBlock, and a BOM comes first on its own.
+    The PassThrough texts and the lines the CurveBlocks stand for concatenate to the lines
+    exactly, except that the comment, blank and N-only lines inside a NURBS block come (in
+    order) right before its CurveBlock, and a BOM comes first on its own.
     Raises InputError (or CurveError) at FILE:LINE:COL of the word at fault, when the stream
     reaches it; an unknown dialect is refused at once.
     """
     if dialect not in DIALECTS:
         raise InputError(f"unknown G-code dialect '{dialect}' (use auto, fanuc or linuxcnc)")
-    return _Reader(str(path), dialect).items(text)
+    return _Reader(str(path), dialect).items(lines)
 
 
 class _Reader:
@@ -67,35 +77,31 @@ class _Reader:
         self.last_curve: NurbsCurveReader | None = None  # the modal G6.2 curve's rules
         self.kept: list[str] = []  # the inert lines inside the open block, yielded before it
 
-    def items(self, text: str) -> Iterator[ProgramItem]:
-        if text.startswith(BOM):  # kept byte for byte, and not part of the first line
+    def items(self, lines: Iterator[str]) -> Iterator[ProgramItem]:
+        ahead = _LookAhead(lines)
+        first = ahead.peek(1)
+        if first and first[0].startswith(BOM):  # kept byte for byte, not part of the first line
             yield PassThrough(BOM)
-            text = text[len(BOM):]
-        # "\n" ends a line (a lone "\r" inside one is a space), except in a file whose lines all
-        # end in "\r" (classic Mac OS): read as one line, it would convert nothing
-        newline = "\r" if "\n" not in text and "\r" in text else "\n"
-        program = ProgramCodes.of(text)
+            ahead.replace_first(first[0][len(BOM):])
         # Once a scan reads no line, the next waits for a line take_line reads: where a program
         # writes its points in another form (N words, F on every line), a scan per line would
         # cost more than it saves.
-        scan = True
-        pos = 0  # where the next line starts
+        scan = point_lines.RUNS_ENABLED
         line = 0
-        while pos < len(text):
-            line += 1
-            if scan and program is not None and isinstance(self.open, NurbsCurveReader):
-                n, after = self.open.take_run(program, pos, line)
+        while True:
+            if scan and isinstance(self.open, NurbsCurveReader):
+                n = self._take_run(ahead, line + 1)
                 if n:  # a run of plain control points, scanned at once
-                    line += n - 1
-                    pos = after
+                    line += n
                     continue
                 scan = False
-            end = text.find(newline, pos) + 1 or len(text)
-            line_text = text[pos:end]
-            pos = end
+            line_text = ahead.next()
+            if line_text is None:
+                break
+            line += 1
             if isinstance(self.open, NurbsCurveReader):  # plain lines, read straight from text
                 if self.open.take_line(line_text, line):
-                    scan = True
+                    scan = point_lines.RUNS_ENABLED
                     continue  # a control point
                 closed = self.open.take_knot_line(line_text, line)
                 if closed is not None:  # a closing knot
@@ -120,11 +126,24 @@ class _Reader:
                     self.state.apply(block)
                     yield PassThrough(line_text)
                 else:
-                    self.eol = block.eol or newline
+                    self.eol = block.eol or _line_ending(line_text)
             for assignment in block.assignments:
                 self.params[assignment.number] = assignment.param
         if self.open is not None:
             raise self.open.unfinished()
+
+    def _take_run(self, ahead: _LookAhead, line: int) -> int:
+        """`NurbsCurveReader.take_run` on the next lines (line number `line` on), at most
+        point_lines.RUN_LINES of them and only as far as they are ASCII (where string and byte positions
+        agree; a point line is ASCII): the number of lines it read, now consumed."""
+        assert isinstance(self.open, NurbsCurveReader), "called inside a G06.2 / G6.2 curve"
+        batch = ahead.peek(point_lines.RUN_LINES)
+        n_ascii = next((i for i, text in enumerate(batch) if not text.isascii()), len(batch))
+        if not n_ascii:
+            return 0
+        n, _ = self.open.take_run(point_lines.ProgramCodes("".join(batch[:n_ascii])), 0, line)
+        ahead.drop(n)
+        return n
 
     def _close(self) -> Iterator[ProgramItem]:
         """The kept lines of the block just completed, then its CurveBlock."""
@@ -189,3 +208,45 @@ class _Reader:
                           eol=self.eol, incremental=state.incremental,
                           feed_word_after=None if finished.feed is None else finished.feed.word,
                           feed_u=finished.feed_u, feed_mm_s=finished.feed_mm_s)
+
+
+class _LookAhead:
+    """The lines of a program, with the next few readable before they are taken."""
+
+    def __init__(self, lines: Iterator[str]) -> None:
+        self.lines = lines
+        self.ahead: deque[str] = deque()
+
+    def next(self) -> str | None:
+        """The next line, or None at the end."""
+        if self.ahead:
+            return self.ahead.popleft()
+        return next(self.lines, None)
+
+    def peek(self, n: int) -> list[str]:
+        """The next `n` lines (fewer at the end), left to be taken."""
+        while len(self.ahead) < n:
+            line = next(self.lines, None)
+            if line is None:
+                break
+            self.ahead.append(line)
+        return list(self.ahead)[:n]
+
+    def drop(self, n: int) -> None:
+        """Take the next `n` lines, already peeked."""
+        for _ in range(n):
+            self.ahead.popleft()
+
+    def replace_first(self, line: str) -> None:
+        """Read the next line, already peeked, as `line` (as no line if it is empty)."""
+        if line:
+            self.ahead[0] = line
+        else:
+            self.ahead.popleft()
+
+
+def _line_ending(line_text: str) -> str:
+    """The ending a line the tokenizer gives none is written with: "\\r" in a file whose lines
+    end in it alone. (The last line of a file has none either, but a block opened there never
+    completes.)"""
+    return "\r" if line_text.endswith("\r") else "\n"

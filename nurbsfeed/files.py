@@ -1,0 +1,205 @@
+"""Files: input read as a stream of lines that round-trips byte for byte, and output that reaches
+its file only whole.
+
+Input is decoded as UTF-8 with surrogateescape: a byte that is not UTF-8 becomes a lone
+surrogate and is encoded back to the same byte, so a pass-through line is copied exactly. A line
+keeps its ending ("\\n" or "\\r\\n"; a lone "\\r" inside a line is part of it). A file whose lines
+all end in "\\r" alone (classic Mac OS) would read as one line and convert nothing, so "\\r" ends
+the lines of a file whose first LOOK_AHEAD_BYTES hold a "\\r" and no "\\n"; a "\\n" that follows
+in such a file is refused rather than guessed at.
+
+Output goes to a temporary file beside the target and is renamed into place only when the whole
+conversion succeeded (a device or FIFO is written into from a temporary file at the end, never
+replaced).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import re
+import shutil
+import signal
+import stat
+import tempfile
+from pathlib import Path
+from typing import BinaryIO, Iterator
+
+from nurbsfeed.errors import InputError, Location
+
+ENCODING = "utf-8"
+ERRORS = "surrogateescape"  # any byte sequence round-trips unchanged
+BOM = "\ufeff"
+LOOK_AHEAD_BYTES = 1 << 20  # what decides the line ending, and JSON or G-code
+
+
+class InputFile:
+    """An input file, read as a stream each time `lines()` or `chunks()` is called (the file is
+    open only while one is read); `head`: its first LOOK_AHEAD_BYTES.
+
+    `content`: the bytes to read instead of the file at `path` (a program held in memory). A file
+    that is not a regular file (a pipe: `<(command)`) is read whole into `content` when opened,
+    since it cannot be read twice.
+    """
+
+    def __init__(self, path: Path, content: bytes | None = None) -> None:
+        self.path = path
+        self.content = content
+        if content is None:
+            try:
+                with open(path, "rb") as handle:
+                    if stat.S_ISREG(os.fstat(handle.fileno()).st_mode):
+                        self.head = handle.read(LOOK_AHEAD_BYTES)
+                        return
+                    self.content = handle.read()
+            except OSError as exc:
+                raise _cannot_read(path, exc) from None
+        self.head = self.content[:LOOK_AHEAD_BYTES]
+
+    def _open(self) -> BinaryIO:
+        if self.content is not None:
+            return io.BytesIO(self.content)
+        try:
+            return open(self.path, "rb")
+        except OSError as exc:
+            raise _cannot_read(self.path, exc) from None
+
+    def lines(self) -> Iterator[str]:
+        """The lines, each with its ending, in file order (module docstring)."""
+        cr_only = b"\n" not in self.head and b"\r" in self.head
+        text = io.TextIOWrapper(self._open(), ENCODING, ERRORS, newline="\r" if cr_only else "\n")
+        with text:
+            number = 0
+            for line in _reporting_read_errors(self.path, text):
+                number += 1
+                if cr_only and "\n" in line:
+                    raise InputError("a line ending in LF in a file whose lines end in CR alone "
+                                     "(classic Mac OS): write every line ending the same way",
+                                     Location(str(self.path), number, line.index("\n") + 1))
+                yield line
+
+    def chunks(self, size: int) -> Iterator[bytes]:
+        """The bytes, in pieces of `size` (the last one shorter)."""
+        with self._open() as handle:
+            yield from _reporting_read_errors(self.path, iter(lambda: handle.read(size), b""))
+
+
+def _reporting_read_errors(path: Path, pieces: Iterator) -> Iterator:
+    """`pieces`, with a failing read (EIO, a file truncated under us) reported as unreadable
+    input: an OSError on its way out would read as an output error."""
+    while True:
+        try:
+            piece = next(pieces)
+        except StopIteration:
+            return
+        except OSError as exc:
+            raise _cannot_read(path, exc) from None
+        yield piece
+
+
+def _cannot_read(path: Path, exc: OSError) -> InputError:
+    return InputError(f"cannot read input ({exc.strerror or exc})", Location(str(path)))
+
+
+def read_text(path: Path) -> str:
+    """The whole file as text that round-trips byte for byte (line endings kept), for the
+    analyses that compare two programs line by line; a conversion streams (`InputFile`)."""
+    try:
+        with open(path, encoding=ENCODING, errors=ERRORS, newline="") as handle:
+            return handle.read()
+    except OSError as exc:
+        raise _cannot_read(path, exc) from None
+
+
+def _umask_mode() -> int:
+    """0666 less the process umask: the mode `open()` would give a new file."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+_CREATE_MODE = _umask_mode()
+# Names of an open descriptor (Linux, BSD): whatever file is behind them belongs to the shell's
+# redirection, so it is written into, never replaced (`-o /dev/stdout >> log` must append).
+_DESCRIPTOR_PATH = re.compile(r"/dev/(stdout|stderr|fd/\d+)|/proc/(self|thread-self|\d+)/fd/\d+")
+_STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
+_KIND_NAMES = {stat.S_IFDIR: "a directory", stat.S_IFBLK: "a block device",
+               stat.S_IFSOCK: "a socket"}
+
+
+def output_target(path: Path) -> tuple[Path, bool]:
+    """Where output named `path` goes, and whether it is written through rather than replaced.
+
+    A new name or a regular file is replaced atomically (temporary file + rename); behind a
+    symbolic link, the file it points to is (the link stays). A character device (/dev/null, a
+    terminal), a FIFO or a descriptor's name (/dev/stdout) is opened and written, never replaced.
+    Anything else (a directory, a block device, a socket, a link to nothing) is refused: nurbsfeed
+    never replaces a file that is not a regular file.
+    """
+    where = Location(str(path))
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        if os.path.islink(path):
+            raise InputError(f"cannot write output: a symbolic link to {os.readlink(path)}, "
+                             "which does not exist", where) from None
+        if not path.parent.is_dir():
+            raise InputError(f"cannot write output: directory {path.parent} does not exist",
+                             where) from None
+        return path, False
+    except OSError as exc:
+        raise InputError(f"cannot write output ({exc.strerror})", where) from None
+    if (stat.S_ISCHR(mode) or stat.S_ISFIFO(mode)
+            or _DESCRIPTOR_PATH.fullmatch(os.path.abspath(path))):
+        return path, True
+    if stat.S_ISREG(mode):
+        return Path(os.path.realpath(path)), False
+    kind = _KIND_NAMES.get(stat.S_IFMT(mode), "not a regular file")
+    raise InputError(f"cannot write output: it is {kind} (nurbsfeed writes regular files, "
+                     "character devices and FIFOs)", where)
+
+
+@contextlib.contextmanager
+def atomic_output(path: Path | None) -> Iterator[BinaryIO]:
+    """A binary stream whose content reaches `path` only if the block completes.
+
+    Always a temporary file first, removed on every way out (an error, an exception from a
+    signal): renamed onto `path` (see `output_target`), or copied into it when `path` is written
+    through; None: the caller copies it out (stdout). A failure never leaves partial output.
+    """
+    final, through = output_target(path) if path is not None else (None, False)
+    folder = final.parent if final is not None and not through else None
+    # A stop signal (cli turns it into an exception) between creating the file and holding its
+    # name would leave it behind: held until the cleanup below knows the name.
+    handle = None
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
+    try:
+        try:
+            handle = tempfile.NamedTemporaryFile(
+                "w+b", dir=folder, prefix=f".{final.name}." if folder else "nurbsfeed.",
+                suffix=".part", delete=False)
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, held)
+        with handle:
+            yield handle
+            handle.flush()
+            if through:
+                handle.seek(0)
+                with open(os.open(final, os.O_WRONLY | os.O_APPEND), "ab") as sink:
+                    shutil.copyfileobj(handle, sink, 1 << 20)
+            elif final is not None:
+                os.fsync(handle.fileno())
+        if folder is not None:
+            if os.path.lexists(final) and not stat.S_ISREG(os.lstat(final).st_mode):
+                raise InputError("cannot write output: it is no longer a regular file",
+                                 Location(str(path)))  # swapped since output_target looked
+            os.chmod(handle.name, _CREATE_MODE)  # a temp file is 0600; a new file is not
+            os.replace(handle.name, final)
+        else:
+            os.unlink(handle.name)
+    except BaseException:
+        if handle is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(handle.name)
+        raise
