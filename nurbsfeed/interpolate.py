@@ -537,8 +537,6 @@ class _Stretch:
         self.u = np.empty(size)
         self.pts = np.empty((size, 3))
         self.u_bump = self.u_start  # u at the bump's first point, from the last full run
-        self.last_u = self.u_start  # u and point at the run's last stepped point (n - 1)
-        self.last_point = np.zeros(3)
         # one pass over the targets: their sum, the last one, rk2c's drift (and, if resident,
         # the targets themselves)
         node, drift, total, carry = 0, 0.0, 0.0, 0.0
@@ -598,9 +596,8 @@ class _Stretch:
             if hi == last:
                 break
             k = hi
-        self.last_u = u
-        self.last_point = self.pts[base + m].copy()
-        gap = math.sqrt(sum((float(self.end_point[i]) - float(self.last_point[i])) ** 2
+        last_point = self.pts[base + m]  # the run's last stepped point (n - 1)
+        gap = math.sqrt(sum((float(self.end_point[i]) - float(last_point[i])) ** 2
                             for i in range(3)))
         return (gap if u <= self.u_end else -gap) - sigma * self.last_ds
 
