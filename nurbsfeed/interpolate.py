@@ -54,7 +54,7 @@ from functools import cached_property
 
 import numpy as np
 
-from nurbsfeed.geometry.kernel import find_span, point_d1, span_polynomials
+from nurbsfeed.geometry.kernel import find_span, point_d1
 from nurbsfeed.jit import jit
 from nurbsfeed.planning.planner import Plan
 from nurbsfeed.planning.timelaw import TimeLaw, evaluate
@@ -194,13 +194,6 @@ def step_spans(method, knots, coef, degree, n_spans, u0, ds, sigma, slow_speed, 
         guess = h / slow_speed if speed < slow_speed else h / speed
         guess = min(guess, u_range)
         u = u + _chord_step(knots, coef, degree, n_ctrl, u, px, py, pz, h, guess, span)
-
-
-@jit
-def step_curve(method, knots, cw, degree, n_spans, u0, ds, sigma, slow_speed, u_out, p_out):
-    """`step_spans` for a curve given by its homogeneous control points cw (n+1, 4)."""
-    step_spans(method, knots, span_polynomials(knots, cw, degree), degree, n_spans, u0, ds,
-               sigma, slow_speed, u_out, p_out)
 
 
 @jit

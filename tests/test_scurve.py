@@ -10,7 +10,6 @@ from hypothesis import strategies as st
 from nurbsfeed.planning.scurve import (peak_speed, reachable_speed, scan_speeds,
                                        transition_distance_mm, transition_phases,
                                        transition_time_s)
-from nurbsfeed.planning.timelaw import speed_at_arc
 from tests.conftest import law_at, law_from_segments, law_increments, law_speed_at_arc
 
 speeds = st.floats(0.0, 500.0)
@@ -140,9 +139,7 @@ def test_speed_at_arc_skips_only_pieces_that_cannot_exceed_the_floor() -> None:
     s = np.linspace(0.0, s_key[-1], 4001)
     full = law_speed_at_arc(law, s)
     floor = np.random.default_rng(5).uniform(0.0, 100.0, s.size)
-    out = np.empty(s.size)
-    speed_at_arc(law.t0_s, law.s0_mm, law.v0_mm_s, law.a0_mm_s2, law.jerk_mm_s3,
-                 law.duration_s, s, floor, out)
+    out = law_speed_at_arc(law, s, floor)
     solved = out > 0.0
     assert np.allclose(out[solved], full[solved], rtol=1e-10, atol=0.0)  # Newton to 1e-12
     assert np.all(full[~solved] <= floor[~solved] * (1 + 1e-12))  # skipped: cannot exceed
