@@ -64,9 +64,8 @@ def convert_each(sources: list[Path], folder: Path) -> dict[tuple[str, str], Pat
     return out
 
 
-
 # ---- the time law as the tests read it (the product reads it only through TimeLaw.sample and
-# the compiled kernels, which these call) ----------------------------------------------------------
+# the compiled kernels, which these call) ---------------------------------------------------------
 def law_from_segments(s_key_mm, v_key_mm_s, v_peak_mm_s, hold_start_mm, hold_end_mm,
                       acc_mm_s2, jerk_mm_s3) -> TimeLaw:
     """The law the planner builds from these segments (chain_segments, then from_pieces)."""
@@ -90,8 +89,8 @@ def law_increments(law: TimeLaw, t_s: np.ndarray) -> np.ndarray:
     return (law.s0_mm[piece[1:]] - law.s0_mm[piece[:-1]]) + (local[1:] - local[:-1])
 
 
-def law_speed_at_arc(law: TimeLaw, s_mm: np.ndarray, floor_mm_s: np.ndarray | None = None,
-                     ) -> np.ndarray:
+def law_speed_at_arc(law: TimeLaw, s_mm: np.ndarray,
+                     floor_mm_s: np.ndarray | None = None) -> np.ndarray:
     """v where the law passes arc length s (M,) -> (M,): the planner's kernel, which leaves 0
     where the law's piece cannot exceed the floor (M,) (default: every piece solved). The law's
     arrays are passed writable, as the planner passes them: read-only ones would compile the
