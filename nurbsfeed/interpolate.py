@@ -48,14 +48,13 @@ case) is sampled once and its last run is what is handed on.
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
 
-from nurbsfeed.geometry.kernel import find_span, point_d1, span_polynomials
+from nurbsfeed.geometry.kernel import find_span, point_d1
 from nurbsfeed.jit import jit
 from nurbsfeed.planning.planner import Plan
 from nurbsfeed.planning.timelaw import TimeLaw, evaluate
@@ -195,13 +194,6 @@ def step_spans(method, knots, coef, degree, n_spans, u0, ds, sigma, slow_speed, 
         guess = h / slow_speed if speed < slow_speed else h / speed
         guess = min(guess, u_range)
         u = u + _chord_step(knots, coef, degree, n_ctrl, u, px, py, pz, h, guess, span)
-
-
-@jit
-def step_curve(method, knots, cw, degree, n_spans, u0, ds, sigma, slow_speed, u_out, p_out):
-    """`step_spans` for a curve given by its homogeneous control points cw (n+1, 4)."""
-    step_spans(method, knots, span_polynomials(knots, cw, degree), degree, n_spans, u0, ds,
-               sigma, slow_speed, u_out, p_out)
 
 
 @jit
@@ -411,7 +403,6 @@ class Interpolation:
     points: np.ndarray  # C(u_k), full precision; first and last exactly the curve ends
     ds_mm: np.ndarray  # the targets actually stepped, (N,)
     landing_runs: float  # kernel runs over all stretches, a run from a bump on in its share
-    step_seconds: float  # wall time of the last full kernel run of every stretch
     stretches: tuple[_StretchLaw, ...]  # what v, a, j are computed from when asked for
     start_jerk_mm_s3: float  # j at the first point (at rest there: v = a = 0)
 
@@ -500,13 +491,12 @@ def _last_flat_periods(t0, a0, jk, v0, duration, t_a, t_b, n, periods):
 @dataclass(frozen=True)
 class _Landing:
     """How one stretch landed: sigma, the bump and its depth, the kernel runs it took (a run
-    from the bump on in its share) and the wall time of its last full run."""
+    from the bump on in its share)."""
 
     sigma: float
     bump: _Bump | None
     slowdown: float
     runs: float
-    seconds: float
 
 
 class _Stretch:
@@ -540,8 +530,6 @@ class _Stretch:
         self.u = np.empty(size)
         self.pts = np.empty((size, 3))
         self.u_bump = self.u_start  # u at the bump's first point, from the last full run
-        self.last_u = self.u_start  # u and point at the run's last stepped point (n - 1)
-        self.last_point = np.zeros(3)
         # one pass over the targets: their sum, the last one, rk2c's drift (and, if resident,
         # the targets themselves)
         node, drift, total, carry = 0, 0.0, 0.0, 0.0
@@ -601,9 +589,8 @@ class _Stretch:
             if hi == last:
                 break
             k = hi
-        self.last_u = u
-        self.last_point = self.pts[base + m].copy()
-        gap = math.sqrt(sum((float(self.end_point[i]) - float(self.last_point[i])) ** 2
+        last_point = self.pts[base + m]  # the run's last stepped point (n - 1)
+        gap = math.sqrt(sum((float(self.end_point[i]) - float(last_point[i])) ** 2
                             for i in range(3)))
         return (gap if u <= self.u_end else -gap) - sigma * self.last_ds
 
@@ -623,15 +610,13 @@ class _Stretch:
         # LANDING_REL_MAX.
         noise = EPS * (total + max(abs(float(x)) for x in self.end_point)) * math.sqrt(n)
         tol = max(LANDING_REL_TOL * last_ds, min(noise, LANDING_REL_MAX * last_ds))
-        start = time.perf_counter()
         r = self.run(sigma)
-        seconds = time.perf_counter() - start
         runs = 1.0
         if abs(r) > tol and r < 0.0 and self.bump is not None:
             landed = self._land_bump(self.bump, sigma, r, tol)
             if landed is not None:
                 slowdown, bump_runs = landed
-                return _Landing(sigma, self.bump, slowdown, runs + bump_runs, seconds)
+                return _Landing(sigma, self.bump, slowdown, runs + bump_runs)
             r = self.run(sigma)  # the bump could not land: back to the plain run
             runs += 1.0
         # d(residual)/d(sigma) ~ -total: Newton, then secant steps, never above 1 (that would
@@ -642,9 +627,7 @@ class _Stretch:
         kept = None
         sigma = min(sigma + r / total, 1.0)
         while abs(r_prev) > tol:
-            start = time.perf_counter()
             r = self.run(sigma)
-            seconds = time.perf_counter() - start
             runs += 1.0
             improved = abs(r) < best[0]
             if improved:
@@ -664,7 +647,7 @@ class _Stretch:
             else:
                 self.run(sigma)
                 runs += 1.0
-        return _Landing(sigma, None, 0.0, runs, seconds)
+        return _Landing(sigma, None, 0.0, runs)
 
     def _land_bump(self, bump: _Bump, sigma: float, r_full: float,
                    tol: float) -> tuple[float, float] | None:
@@ -730,14 +713,13 @@ class _Stretch:
 
 class Stepping:
     """One curve's interpolation, produced chunk by chunk (`chunks`): memory is bounded by
-    CHUNK_PERIODS whatever the curve's duration. The landing figures (runs, seconds, the
-    stretches' laws) are complete once the chunks are exhausted."""
+    CHUNK_PERIODS whatever the curve's duration. The landing figures (runs, the stretches' laws)
+    are complete once the chunks are exhausted."""
 
     def __init__(self, plan: Plan, method: str = "rk2c") -> None:
         self.plan = plan
         self.method = method
         self.runs = 0.0
-        self.seconds = 0.0
         self.stretches: list[_StretchLaw] = []
         self.start_jerk_mm_s3 = 0.0
 
@@ -763,7 +745,6 @@ class Stepping:
                 sigma = min(1.0, 1.0 - stretch.drift / stretch.total + LANDING_MARGIN_REL)
             landing = stretch.land(sigma)
             self.runs += landing.runs
-            self.seconds += landing.seconds
             st = _StretchLaw(k0, stretch.n, law, stretch.t_a, stretch.t_b,
                              float(plan.piece_scale[p]), landing.sigma, landing.bump,
                              landing.slowdown)
@@ -795,4 +776,4 @@ def interpolate(plan: Plan, method: str = "rk2c") -> Interpolation:
     points = np.concatenate([c.points for c in chunks])
     ds = np.concatenate([c.ds_mm for c in chunks])[1:]
     return Interpolation(method, plan.limits.period_s, u, points, ds, stepping.runs,
-                         stepping.seconds, tuple(stepping.stretches), stepping.start_jerk_mm_s3)
+                         tuple(stepping.stretches), stepping.start_jerk_mm_s3)

@@ -52,6 +52,8 @@ def evaluate(degree: int, knots, points, weights, u: float):
     a = [np.zeros(3) for _ in range(3)]
     wd = [0.0, 0.0, 0.0]
     for i in range(len(pts)):
+        if not knots[i] <= u <= knots[i + degree + 1]:
+            continue  # N_i,p and its derivatives vanish outside [u_i, u_i+p+1] (local support)
         for order in range(3):
             n = basis_derivative(i, degree, u, knots, order)
             a[order] = a[order] + n * w[i] * pts[i]

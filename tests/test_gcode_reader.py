@@ -23,6 +23,7 @@ from nurbsfeed.gcode.point_lines import RUN_LINES, _number, scan_point_lines
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.program import CurveBlock, PassThrough
 from tests.bench.programs import fanuc_program
+from tests.conftest import examples
 
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLES = ROOT / "samples"
@@ -468,7 +469,8 @@ def mutated_programs(draw: st.DrawFn) -> tuple[str, str]:
     return "".join(lines), draw(st.sampled_from(["auto", "fanuc", "linuxcnc"]))
 
 
-@settings(max_examples=1500, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=examples(1500), deadline=None,
+          suppress_health_check=[HealthCheck.too_slow])
 @given(mutated_programs())
 def test_mutated_programs_fail_only_with_input_errors(case: tuple[str, str]) -> None:
     text, dialect = case
@@ -753,7 +755,7 @@ def test_scan_numbers_are_float_s_at_the_edges(number: str) -> None:
     check_number(number)
 
 
-@settings(max_examples=2000, deadline=None)
+@settings(max_examples=examples(2000), deadline=None)
 @given(plain_numbers())
 def test_scan_numbers_are_float_s(number: str) -> None:
     check_number(number)
@@ -784,7 +786,7 @@ def point_line_texts(draw: st.DrawFn) -> str:
     return line + draw(st.sampled_from(["\n", "\r\n", "", "\r", " \n", "\n\r", "\r\r\n"]))
 
 
-@settings(max_examples=2000, deadline=None)
+@settings(max_examples=examples(2000), deadline=None)
 @given(point_line_texts(), st.sampled_from(["", "K9 X1 Y2 Z3\n", "G1 X0\n"]))
 def test_scan_reads_exactly_the_point_lines(line: str, after: str) -> None:
     """A scan reads the line iff _POINT_LINE matches it, its numbers are within Clinger's fast

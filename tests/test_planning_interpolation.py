@@ -13,6 +13,7 @@ from nurbsfeed.planning.limits import Limits, curvature_threshold
 from nurbsfeed.planning.planner import KIND_PEAK, plan_curve
 from tests import naive_nurbs
 from tests.limits_check import assert_within, measure
+from tests.conftest import law_increments, law_speed_at_arc
 from tests.test_geometry import random_curve
 
 
@@ -172,7 +173,7 @@ def test_sharp_corner_is_passed_at_rest(paper_limits) -> None:
     plan = plan_curve(curve, paper_limits)
     corner = plan.grid.stop_index
     assert corner.size == 1 and plan.grid.u[corner[0]] == 0.5
-    law_v = plan.law.speed_at_arc(plan.grid.s_mm[corner])
+    law_v = law_speed_at_arc(plan.law, plan.grid.s_mm[corner])
     assert law_v[0] == pytest.approx(0.0, abs=1e-9)
     result = interpolate(plan)
     assert np.min(np.linalg.norm(result.points - [20, 0, 0], axis=1)) < 1e-6
@@ -218,7 +219,7 @@ def test_rk2c_lands_with_a_bump_in_the_last_cruise_that_raises_nothing(butterfly
     n = plan.n_periods
     t_plan = np.arange(n + 1) * (law.duration_s / n)
     t_plan[-1] = law.duration_s
-    ratio = result.ds_mm / (result.sigma[0] * law.increments(t_plan))
+    ratio = result.ds_mm / (result.sigma[0] * law_increments(law, t_plan))
     assert np.all(ratio <= 1.0 + 1e-12)
     lowered = np.flatnonzero(ratio < 1.0 - 1e-12)
     assert lowered.size and lowered[-1] - lowered[0] < BUMP_PERIODS
@@ -239,3 +240,15 @@ def test_a_stretch_without_a_cruise_lands_by_sigma_alone(paper_limits) -> None:
     assert 1 - 1e-5 < result.sigma[0] <= 1.0
     assert np.array_equal(result.points[-1], curve.points[-1])
     assert float(result.feed_fluctuation().max()) <= 1e-5
+
+
+def test_the_uniform_slowdown_keeps_the_limits_the_fix_rounds_left() -> None:
+    """The last resort of planning step 5: on this random curve (one in ~2000) the fix rounds
+    leave nodes above the limit, and the whole law is slowed by their largest v / limit."""
+    rng = np.random.default_rng(2720)
+    curve = random_curve(rng)
+    lim = random_limits(rng)
+    plan = plan_curve(curve, lim)
+    assert plan.uniform_slowdown > 1.1
+    assert plan.time_scale >= plan.uniform_slowdown
+    assert_within(curve, interpolate(plan, "rk2c"), lim)

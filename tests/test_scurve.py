@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from nurbsfeed.planning.scurve import (peak_speed, reachable_speed, scan_speeds,
                                        transition_distance_mm, transition_phases,
                                        transition_time_s)
-from nurbsfeed.planning.timelaw import TimeLaw, speed_at_arc
+from tests.conftest import law_at, law_from_segments, law_increments, law_speed_at_arc
 
 speeds = st.floats(0.0, 500.0)
 accs = st.floats(1.0, 1e4)
@@ -100,30 +100,30 @@ def test_time_law_is_continuous_and_respects_the_tangential_limits() -> None:
     holds = np.zeros(len(length))
     peak = np.array([peak_speed(v_key[i], v_key[i + 1], length[i], 100.0, acc, jerk)
                      for i in range(len(length))])
-    law = TimeLaw.from_segments(s_key, v_key, peak, holds, holds, acc, jerk)
+    law = law_from_segments(s_key, v_key, peak, holds, holds, acc, jerk)
     t = np.linspace(0.0, law.duration_s, 20001)
-    s, v, a, j = law.at(t)
+    s, v, a, j = law_at(law, t)
     assert s[0] == 0.0 and s[-1] == pytest.approx(s_key[-1], abs=1e-9)
     assert np.all(np.diff(s) >= -1e-12)
     assert np.max(np.abs(a)) <= acc * (1 + 1e-9) and np.max(np.abs(j)) <= jerk
     assert np.max(v) <= 100.0 * (1 + 1e-12)
     # continuity of s, v, a at every piece start (evaluate just before and at the boundary)
     inner = law.t0_s[1:]
-    before = law.at(inner - 1e-12)
-    after = law.at(inner)
+    before = law_at(law, inner - 1e-12)
+    after = law_at(law, inner)
     for k in range(3):
         assert np.allclose(before[k], after[k], atol=1e-6)
     # the law passes every key point at its planned speed
     t_key = np.interp(s_key, s, t)
-    assert np.allclose(law.at(t_key)[1], v_key, atol=1e-3)
+    assert np.allclose(law_at(law, t_key)[1], v_key, atol=1e-3)
     # increments agree with differences of s
-    inc = law.increments(t)
+    inc = law_increments(law, t)
     assert np.allclose(inc, np.diff(s), atol=1e-9)
-    assert np.allclose(law.speed_at_arc(s[1:-1]), v[1:-1], atol=1e-6)
+    assert np.allclose(law_speed_at_arc(law, s[1:-1]), v[1:-1], atol=1e-6)
     # in any order (binary search instead of the forward pointer): the same speeds
     shuffled = np.random.default_rng(4).permutation(s.size - 2) + 1
-    assert np.allclose(law.speed_at_arc(s[shuffled]), v[shuffled], atol=1e-6)
-    assert np.allclose(law.at(t[shuffled])[1], v[shuffled], atol=1e-12)
+    assert np.allclose(law_speed_at_arc(law, s[shuffled]), v[shuffled], atol=1e-6)
+    assert np.allclose(law_at(law, t[shuffled])[1], v[shuffled], atol=1e-12)
 
 
 def test_speed_at_arc_skips_only_pieces_that_cannot_exceed_the_floor() -> None:
@@ -135,13 +135,11 @@ def test_speed_at_arc_skips_only_pieces_that_cannot_exceed_the_floor() -> None:
     length = np.diff(s_key)
     peak = np.array([peak_speed(v_key[i], v_key[i + 1], length[i], 100.0, acc, jerk)
                      for i in range(3)])
-    law = TimeLaw.from_segments(s_key, v_key, peak, np.zeros(3), np.zeros(3), acc, jerk)
+    law = law_from_segments(s_key, v_key, peak, np.zeros(3), np.zeros(3), acc, jerk)
     s = np.linspace(0.0, s_key[-1], 4001)
-    full = law.speed_at_arc(s)
+    full = law_speed_at_arc(law, s)
     floor = np.random.default_rng(5).uniform(0.0, 100.0, s.size)
-    out = np.empty(s.size)
-    speed_at_arc(law.t0_s, law.s0_mm, law.v0_mm_s, law.a0_mm_s2, law.jerk_mm_s3,
-                 law.duration_s, s, floor, out)
+    out = law_speed_at_arc(law, s, floor)
     solved = out > 0.0
     assert np.allclose(out[solved], full[solved], rtol=1e-10, atol=0.0)  # Newton to 1e-12
     assert np.all(full[~solved] <= floor[~solved] * (1 + 1e-12))  # skipped: cannot exceed

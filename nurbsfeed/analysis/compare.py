@@ -17,7 +17,7 @@ from nurbsfeed.interpolate import (
     SLOW_SPEED_REL,
     Interpolation,
     interpolate,
-    step_curve,
+    step_spans,
 )
 from nurbsfeed.machine import Machine
 from nurbsfeed.pipeline import plan_block
@@ -79,7 +79,7 @@ def kernel_seconds(plan: Plan, result: Interpolation, repeat: int) -> float:
     times = []
     for _ in range(repeat):
         start = time.perf_counter()
-        step_curve(code, curve.knots, curve.homogeneous, curve.degree, curve.n_ctrl,
+        step_spans(code, curve.knots, curve.span_polynomials, curve.degree, curve.n_ctrl,
                    curve.u_min, result.ds_mm, 1.0, slow, u, pts)
         times.append(time.perf_counter() - start)
     return statistics.median(times)

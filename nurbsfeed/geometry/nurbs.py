@@ -185,8 +185,9 @@ class NurbsCurve:
 
     # ---- vectorised evaluation -------------------------------------------------------------------
     def _eval(self, u: np.ndarray | float, order: int) -> np.ndarray:
-        """(order+1, *shape(u), 3) via the compiled evaluator of geometry.kernel."""
-        flat = np.ascontiguousarray(np.ravel(u), dtype=float)
+        """(order+1, *shape(u), 3) via the compiled evaluator of geometry.kernel (u copied: a
+        read-only u would compile the evaluator once more, for nothing)."""
+        flat = np.array(np.ravel(u), dtype=float)
         out = np.empty((order + 1, flat.size, 3))
         eval_many(self.knots, self.span_polynomials, self.degree, flat, order, out)
         return out.reshape((order + 1,) + np.shape(u) + (3,))
@@ -223,8 +224,9 @@ def check_knots(k: np.ndarray, degree: int, n_ctrl: int) -> None:
                          f"{n_ctrl + order} knots (control points + order), got {k.size}")
     if not np.isfinite(k).all():
         raise CurveError(f"knot {int(np.argmax(~np.isfinite(k)))} is not finite")
-    if (k[1:] < k[:-1]).any():
-        i = int(np.flatnonzero(k[1:] < k[:-1])[0]) + 1
+    widths = np.diff(k)
+    if widths.min() < 0.0:
+        i = int(np.flatnonzero(widths < 0.0)[0]) + 1
         raise CurveError(f"knots must not decrease: knot {i} ({k[i]:g}) < knot {i - 1} "
                          f"({k[i - 1]:g})")
     if k[order - 1] != k[0] or k[-order] != k[-1]:  # (non-decreasing: the ends' runs equal)
@@ -235,9 +237,8 @@ def check_knots(k: np.ndarray, degree: int, n_ctrl: int) -> None:
     knot_range = float(k[-1]) - float(k[0])  # (Python floats: inf, not a numpy warning)
     if not math.isfinite(knot_range):
         raise CurveError(f"knot range {k[0]:g} .. {k[-1]:g} is wider than a double holds")
-    widths = np.diff(k)
-    narrowest = int(np.argmin(np.where(widths > 0, widths, np.inf)))
-    if widths[narrowest] < MIN_SPAN_REL * knot_range:
+    if widths[widths > 0.0].min() < MIN_SPAN_REL * knot_range:
+        narrowest = int(np.argmin(np.where(widths > 0, widths, np.inf)))
         raise CurveError(f"knot span {float(k[narrowest])!r} .. {float(k[narrowest + 1])!r} is "
                          f"{widths[narrowest] / knot_range:.1e} of the knot range; at least "
                          f"{MIN_SPAN_REL:g}")
@@ -255,8 +256,9 @@ def check_knots(k: np.ndarray, degree: int, n_ctrl: int) -> None:
 def far_control_point(points: np.ndarray) -> int | None:
     """The first control point with a coordinate beyond MAX_COORDINATE, or None: (n, d) -> index.
     (The readers call it to place the error on that point's line.)"""
-    far = np.flatnonzero((np.abs(points) > MAX_COORDINATE).any(axis=1))
-    return int(far[0]) if far.size else None
+    if not np.abs(points).max(initial=0.0) > MAX_COORDINATE:  # (the common case: one pass)
+        return None
+    return int(np.flatnonzero((np.abs(points) > MAX_COORDINATE).any(axis=1))[0])
 
 
 def far_message(index: int, point: np.ndarray) -> str:

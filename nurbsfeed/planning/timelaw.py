@@ -22,7 +22,11 @@ PHASES_PER_SEGMENT = 9  # hold, 3 up, cruise, 3 down, hold
 
 @jit
 def chain_segments(s_key, v_key, v_peak, hold_start, hold_end, acc, jerk):
-    """Chain the segments into constant-jerk pieces; see TimeLaw.from_segments."""
+    """Chain the segments into constant-jerk pieces: hold at v_key[i], accelerate to v_peak[i],
+    cruise, decelerate to v_key[i+1], hold. s_key, v_key: (K,); the others (K-1,). Each segment
+    ends exactly at s_key[i+1]: the cruise takes up whatever distance the transitions and holds
+    leave, and the state is reset at every key. Returns the pieces' t0, s0, v0, a0, jerk (P,),
+    the time at each key (K,) and the duration (`TimeLaw.from_pieces` takes them as they are)."""
     n_seg = s_key.size - 1
     cap = n_seg * PHASES_PER_SEGMENT
     t0 = np.empty(cap)
@@ -200,7 +204,7 @@ def evaluate(t0, s0, v0, a0, jk, t, piece, local, v, a, j):
 
 @dataclass(frozen=True, eq=False)
 class TimeLaw:
-    """(P,) arrays, one entry per constant-jerk piece; duration and length of the whole law."""
+    """(P,) arrays, one entry per constant-jerk piece; the duration of the whole law."""
 
     t0_s: np.ndarray
     s0_mm: np.ndarray
@@ -209,38 +213,16 @@ class TimeLaw:
     jerk_mm_s3: np.ndarray
     key_t_s: np.ndarray  # (K,) time at which the law passes each key point
     duration_s: float
-    length_mm: float
-
-    @classmethod
-    def from_segments(cls, s_key_mm: np.ndarray, v_key_mm_s: np.ndarray,
-                      v_peak_mm_s: np.ndarray, hold_start_mm: np.ndarray,
-                      hold_end_mm: np.ndarray, acc_mm_s2: float, jerk_mm_s3: float) -> "TimeLaw":
-        """Chain the segments: hold at v_start, accelerate to v_peak, cruise, decelerate, hold.
-
-        s_key, v_key: (K,); the others (K-1,). Each segment ends exactly at s_key[i+1]: the cruise
-        takes up whatever distance the transitions leave, and the state is reset at every key.
-        """
-        f = np.ascontiguousarray
-        *arrays, duration = chain_segments(
-            f(s_key_mm, dtype=float), f(v_key_mm_s, dtype=float), f(v_peak_mm_s, dtype=float),
-            f(hold_start_mm, dtype=float), f(hold_end_mm, dtype=float), float(acc_mm_s2),
-            float(jerk_mm_s3))
-        return cls.from_pieces(*arrays, duration, float(s_key_mm[-1]))
 
     @classmethod
     def from_pieces(cls, t0_s: np.ndarray, s0_mm: np.ndarray, v0_mm_s: np.ndarray,
                     a0_mm_s2: np.ndarray, jerk_mm_s3: np.ndarray, key_t_s: np.ndarray,
-                    duration_s: float, length_mm: float) -> "TimeLaw":
+                    duration_s: float) -> "TimeLaw":
         """The law of the pieces `chain_segments` made (the planner's compiled loop)."""
         arrays = (t0_s, s0_mm, v0_mm_s, a0_mm_s2, jerk_mm_s3, key_t_s)
         for arr in arrays:
             arr.setflags(write=False)
-        return cls(*arrays, duration_s=float(duration_s), length_mm=float(length_mm))
-
-    @property
-    def is_empty(self) -> bool:
-        """A law of zero length (a curve whose control points are all equal)."""
-        return self.t0_s.size == 0
+        return cls(*arrays, duration_s=float(duration_s))
 
     def sample(self, t_s: np.ndarray) -> tuple[np.ndarray, ...]:
         """At times (N,) (increasing is fastest): piece index, arc length within the piece
@@ -251,26 +233,3 @@ class TimeLaw:
         evaluate(self.t0_s, self.s0_mm, self.v0_mm_s, self.a0_mm_s2, self.jerk_mm_s3, t_s, piece,
                  local, v, a, j)
         return piece, local, v, a, j
-
-    def at(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """s, v, a, j at absolute times (N,) -> four (N,) arrays."""
-        if self.is_empty:
-            zero = np.zeros(np.shape(t_s))
-            return zero, zero, zero, zero
-        piece, local, v, a, j = self.sample(t_s)
-        return self.s0_mm[piece] + local, v, a, j
-
-    def increments(self, t_s: np.ndarray) -> np.ndarray:
-        """s(t[k+1]) - s(t[k]) for sorted times (N+1,) -> (N,), computed piece-locally so that a
-        tiny step far along the curve keeps its relative precision."""
-        piece, local, _, _, _ = self.sample(t_s)
-        return (self.s0_mm[piece[1:]] - self.s0_mm[piece[:-1]]) + (local[1:] - local[:-1])
-
-    def speed_at_arc(self, s_mm: np.ndarray) -> np.ndarray:
-        """v where the law passes arc length s: (M,) -> (M,)."""
-        s_mm = np.ascontiguousarray(s_mm, dtype=float)
-        out = np.zeros_like(s_mm)
-        if not self.is_empty:
-            speed_at_arc(self.t0_s, self.s0_mm, self.v0_mm_s, self.a0_mm_s2, self.jerk_mm_s3,
-                         self.duration_s, s_mm, np.full(s_mm.size, -np.inf), out)
-        return out

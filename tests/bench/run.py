@@ -37,6 +37,7 @@ from nurbsfeed.readers.json_curves import read_json_curves
 from nurbsfeed.machine import load_machine
 from nurbsfeed.planning.planner import plan_curve
 from tests.bench.programs import fanuc_program, write_pass_through_program
+from tests.conftest import law_increments
 
 ROOT = Path(__file__).resolve().parents[2]
 REPEATS = 30
@@ -49,7 +50,7 @@ def kernel_us_per_step() -> dict[str, float]:
     plan = plan_curve(curve, load_machine("paper-table1").limits)
     law = plan.law
     t = np.arange(plan.n_periods + 1) * (law.duration_s / plan.n_periods)
-    ds = law.increments(t)
+    ds = law_increments(law, t)
     u = np.empty(ds.size + 1)
     pts = np.empty((ds.size + 1, 3))
     slow = SLOW_SPEED_REL * plan.length_mm / (curve.u_max - curve.u_min)
