@@ -43,3 +43,23 @@ def test_the_largest_parameter_number_and_leading_zeros_are_read(tmp_path: Path)
     result = CliRunner().invoke(main, ["convert", str(source), "-o", str(tmp_path / "o.nc")])
     assert result.exit_code == 0, result.stderr
     assert (tmp_path / "o.nc").read_text() == source.read_text()
+
+
+def test_a_bug_while_loading_a_profile_is_one_line_not_a_traceback(tmp_path: Path) -> None:
+    """A 400-digit integer in a profile raised OverflowError in the profile check, outside any
+    conversion: the traceback reached the user (tests/fuzz/findings/profile-huge-integer.yaml;
+    the profile loader should refuse it at its line; until then it is an internal error)."""
+    profile = Path(__file__).parent / "fuzz" / "findings" / "profile-huge-integer.yaml"
+    source = tmp_path / "in.ngc"
+    source.write_text("G17 G21 G0 X0 Y0\nM2\n")
+    result = CliRunner().invoke(main, ["convert", str(source), "-m", str(profile), "-o",
+                                       str(tmp_path / "out.nc")])
+    assert result.exit_code == 2
+    assert "Traceback" not in result.stderr and result.stderr.count("\n") == 1, result.stderr
+    assert not (tmp_path / "out.nc").exists()
+
+
+def test_usage_errors_are_still_clicks_own(tmp_path: Path) -> None:
+    result = CliRunner().invoke(main, ["convert", "a.nc", "b.nc"])
+    assert result.exit_code == 2
+    assert result.stderr.endswith("Error: several inputs need -o DIR\n")
