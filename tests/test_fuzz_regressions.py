@@ -29,6 +29,7 @@ def refused(tmp_path: Path, text: str, name: str = "in.nc") -> str:
     ("X#" + "9" * 5000, ":3:2: #99999999...: parameter numbers go from 0 to 999999"),
     ("#" + "9" * 5000 + "=5", ":3:1: #99999999...: parameter numbers go from 0 to 999999"),
     ("#1=#1000000", ":3:4: #1000000: parameter numbers go from 0 to 999999"),
+    ("G1 X- # 1234567", ":3:7: #1234567: parameter numbers go from 0 to 999999"),
 ])
 def test_a_parameter_number_of_thousands_of_digits_is_refused_at_its_place(
         tmp_path: Path, line: str, message: str) -> None:

@@ -210,7 +210,7 @@ class _Scanner:
                              "G-code only (no subroutines, IF/WHILE/GOTO or expressions)")
         ref = _PARAM_REF.match(self.body, self.pos)
         if ref:
-            number = self.parameter_number(ref.group(2), ref.start(2) - 1)
+            number = self.parameter_number(ref.group(2), self.body.index("#", ref.start()))
             if number not in self.params:
                 raise self.error(f"#{number} is used before it is assigned (write #{number}="
                                  "value on an earlier line)")
