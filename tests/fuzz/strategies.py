@@ -154,6 +154,10 @@ INSERTED_LINES = ["", "(a comment)", "; semicolon comment", "N100", "N0005", "(M
                   "G0 Z5.", "G5.3", "G5.2", "G06.2", "G6.2 K1.", "K1.", "K0.", "X1 Y1 P1",
                   "G2.2", "G5.4", "O100 sub", "IF [#1 GT 0] GOTO 10", "/N10 G1 X0", "(", ")",
                   "G05.1 Q1", "G05.1 Q0", "G28 Z0.", "G4 X1.5", "T1 M6", "M30", "N10 G06.2 P3"]
+NURBS_TYPOS = {"G06.2": ["G06.3", "G6", "G062", "G06,2", "G06.2.", "G 06 .2", "G06.20"],
+               "G6.2": ["G6.3", "G62", "G6..2", "G6.2.2", "G06.2"],
+               "G5.2": ["G2.2", "G52", "G5.1", "G05.2", "G5.20", "G5 .2", "G5.3"],
+               "G5.3": ["G3.3", "G53", "G5.2", "G05.3", "G5.4"]}
 ODD_BYTES = [b"\x00", b"\xff", b"\xc3", b"\xed\xa0\x80", b"\xef\xbb\xbf", b"\r", b"\t", b"\x0b",
              b"\x1a", b"\xe2\x80\xa8", b"\xc2\xa0"]
 
@@ -163,7 +167,7 @@ def perturbed_lines(draw: st.DrawFn, lines: list[str]) -> list[str]:
     """`lines` with a few edits of the kinds people make."""
     lines = list(lines)
     for _ in range(draw(st.integers(1, 4))):
-        kind = draw(st.integers(0, 9))
+        kind = draw(st.integers(0, 10))
         at = draw(st.integers(0, max(len(lines) - 1, 0)))
         if not lines:
             lines.append(draw(st.sampled_from(INSERTED_LINES)))
@@ -196,6 +200,11 @@ def perturbed_lines(draw: st.DrawFn, lines: list[str]) -> list[str]:
         elif kind == 8:  # a trailing comment or an inline one
             comment = draw(st.sampled_from(["(c)", ";c", "(MSG, x)", "( nested ( )", "(K1.)"]))
             lines[at] = lines[at] + comment if draw(st.booleans()) else comment + lines[at]
+        elif kind == 10:  # a NURBS code mistyped
+            for code, typos in NURBS_TYPOS.items():
+                if code in lines[at]:
+                    lines[at] = lines[at].replace(code, draw(st.sampled_from(typos)), 1)
+                    break
         else:  # a word with a letter nobody expects
             lines[at] += " " + draw(st.sampled_from(["Q1", "E5.", "A10.", "U1.", "L4", "P2",
                                                      "R0", "R-1", "K-1.", "H1", "D1", "S100"]))
