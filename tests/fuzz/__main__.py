@@ -30,7 +30,7 @@ FAMILIES = ("gcode", "json", "profile", "samples")
 CHUNK = 1000
 CHECK_EVERY = 10  # `nurbsfeed check` (~0.2 s) runs on every tenth case drawn valid
 MAX_SAVED = 300  # failing inputs saved per chunk (a systematic bug fails thousands of cases)
-HANG_S = 30.0  # a case this long is stuck beyond the reach of the oracle's time limit
+HANG_S = 90.0  # a case this long is stuck beyond the reach of the oracle's time limits
 EXIT_HANG = 3
 
 

@@ -31,6 +31,7 @@ from pathlib import Path
 from nurbsfeed.cli import main
 
 TIME_LIMIT_S = 10.0
+CHECK_TIME_LIMIT_S = 60.0  # `check` of a slow inch curve (70,000 moves) takes seconds
 CURVE_COMMENT = b"(nurbsfeed: curve "
 ZERO_LENGTH = b"(nurbsfeed: zero-length curve, no move written)"
 _MOVE_WORD = rb"[XYZF]-?[0-9]*\.?[0-9]*"
@@ -271,7 +272,7 @@ def motion_problem(source: Path, target: Path, machine: Path | None) -> str | No
     from contextlib import redirect_stdout
 
     with redirect_stdout(out):
-        code, stderr, crash = run_cli(args)
+        code, stderr, crash = run_cli(args, CHECK_TIME_LIMIT_S)
     if crash or code != 0:
         return f"nurbsfeed check: exit {code}: {(crash or stderr or out.getvalue()).strip()}"
     return None
