@@ -19,6 +19,7 @@ import argparse
 import multiprocessing
 import os
 import re
+import shutil
 import sys
 import tempfile
 import threading
@@ -77,6 +78,7 @@ def run_chunk(family: str, count: int, seed: int, skip: int, failures_dir: str, 
                 problem = f"hang: more than {HANG_S:g} s, not interrupted (compiled code)"
                 save_case(save_to, stem, current["case"], problem)
                 report.send(("case", index, False, stem, problem))
+                shutil.rmtree(folder, ignore_errors=True)  # the stuck case's .part file too
                 os._exit(EXIT_HANG)
 
     threading.Thread(target=watchdog, daemon=True).start()
