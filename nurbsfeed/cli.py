@@ -37,7 +37,8 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 def reports_errors(func: Callable[..., Any]) -> Callable[..., Any]:
     """Map NurbsfeedError to its message and exit code (never a traceback); a reader of stdout
-    that went away (`| head -1`) ends the run quietly with 141, as if by SIGPIPE."""
+    that went away (`| head -1`) ends the run quietly with 141, as if by SIGPIPE; any other
+    exception is a bug, reported on one line as `nurbsfeed: internal error: ...` with exit 2."""
 
     @functools.wraps(func)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
@@ -49,6 +50,11 @@ def reports_errors(func: Callable[..., Any]) -> Callable[..., Any]:
         except BrokenPipeError:
             _detach_stdout()
             sys.exit(EXIT_BROKEN_PIPE)
+        except (click.ClickException, click.exceptions.Exit, click.Abort):
+            raise  # usage errors: click prints them
+        except Exception as exc:  # a bug outside a conversion (loading a profile): one line,
+            click.echo(f"nurbsfeed: {internal_error(exc)}", err=True)  # as in a batch row
+            sys.exit(EXIT_BAD_INPUT)
 
     return wrapper
 

@@ -82,6 +82,28 @@ _POINT_LINE = re.compile(rf"[Kk]({PLAIN_NUMBER}) [Xx]({PLAIN_NUMBER}) [Yy]({PLAI
 _KNOT_LINE = re.compile(rf"[Kk]({PLAIN_NUMBER})\r?\n?")  # ... and for the closing knots
 
 
+LINEAR_MODES = frozenset({0, 10})  # G0, G1: a K word means nothing (G2/G3: arc centre)
+
+
+def stray_knot(block: Block, state: ModalState) -> InputError | None:
+    """A G06.2 control-point or knot-only block (K with X Y Z R F only) where no curve is open,
+    under G0 or G1 (or no motion): a mistyped or deleted G06.2 (G06.3, G6, G062), whose control
+    points would otherwise pass through as straight moves. None for any other block."""
+    knot = block.first("K")
+    if (knot is None or state.cycle is not None
+            or (state.motion is not None and state.motion not in LINEAR_MODES)
+            or not block.letters() <= _POINT_LETTERS | {"N"}):
+        return None
+    typo = state.unknown_g
+    if typo is not None:
+        return InputError(f"{typo.name} is a G code nurbsfeed does not know, and {knot.name} on "
+                          f"line {knot.line} is a knot of a curve nothing opened: write G06.2 "
+                          "to open it", state.where(typo))
+    return InputError(f"{knot.name}: a NURBS knot with no G06.2 curve open (under "
+                      f"{'no motion mode' if state.motion is None else 'G0/G1'} K means "
+                      "nothing): write G06.2 on the curve's first block", state.where(knot))
+
+
 class NurbsCurveReader:
     """One G06.2 / G6.2 curve read block by block; `take` returns True once it is complete."""
 
@@ -141,6 +163,11 @@ class NurbsCurveReader:
                                  "(degree + 1)", state.where(order))
             self.order = int(order.value)
         if not any(word.letter in AXES for word in block.words):
+            typo = state.unknown_g
+            if typo is not None:
+                raise InputError(f"{typo.name} is a G code nurbsfeed does not know, and the "
+                                 f"{self.label} on line {block.line} has no control point: "
+                                 f"write {self.label} to open the curve", state.where(typo))
             raise InputError(f"the first block of a {self.label} curve needs its first control "
                              "point (X, Y or Z)", self.location)
         self._control_point(block)

@@ -57,6 +57,7 @@ KEYWORDS = frozenset({
 })
 BAD_PARAMETER = ("'#' must be followed by a parameter number (#1=10.5, X#1); named (#<name>) "
                  "and indirect (##1) parameters are not supported")
+PARAMETER_LIMIT = 999999  # above the highest numbered parameter of any controller (Fanuc #100000s)
 CODE_LIMIT = 10000.0  # G and M numbers above this are typos, and would overflow `code`
 
 
@@ -185,6 +186,15 @@ class _Scanner:
         rest = self.body[self.pos:self.pos + 8].rstrip()
         return f"'{printable(rest)}'" if rest else "the end of the line"
 
+    def parameter_number(self, digits: str, pos: int) -> int:
+        """A parameter number as written (#12 -> 12), refused above PARAMETER_LIMIT before int()
+        reads it (Python refuses to convert strings of more than 4300 digits)."""
+        stripped = digits.lstrip("0") or "0"
+        if len(stripped) > len(str(PARAMETER_LIMIT)) or int(stripped) > PARAMETER_LIMIT:
+            shown = digits if len(digits) <= 12 else digits[:8] + "..."
+            raise self.error(f"#{shown}: parameter numbers go from 0 to {PARAMETER_LIMIT}", pos)
+        return int(stripped)
+
     def value(self, owner: str, owner_pos: int) -> tuple[float, str, int | None]:
         """A number or a parameter read after a letter (or after `#n=`): value, text, decimals."""
         self.skip_spaces()
@@ -200,7 +210,7 @@ class _Scanner:
                              "G-code only (no subroutines, IF/WHILE/GOTO or expressions)")
         ref = _PARAM_REF.match(self.body, self.pos)
         if ref:
-            number = int(ref.group(2))
+            number = self.parameter_number(ref.group(2), self.body.index("#", ref.start()))
             if number not in self.params:
                 raise self.error(f"#{number} is used before it is assigned (write #{number}="
                                  "value on an earlier line)")
@@ -350,7 +360,7 @@ def _scan_line(body: str, eol: str, line: int, path: str,
                                      f"value) or follow a letter (X#{ref.group(2)})")
                 raise scan.error(BAD_PARAMETER)
             scan.pos = assign.end()
-            number = int(assign.group(1))
+            number = scan.parameter_number(assign.group(1), start)
             value, _, decimals = scan.value(f"#{number}=", start)
             assignments.append(Assignment(number, Param(value, decimals), start + 1))
         elif char == "[":

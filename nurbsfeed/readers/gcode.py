@@ -37,7 +37,7 @@ from pathlib import Path
 
 from nurbsfeed.errors import InputError, Location
 from nurbsfeed.files import BOM
-from nurbsfeed.gcode.fanuc import NurbsCurveReader
+from nurbsfeed.gcode.fanuc import NurbsCurveReader, stray_knot
 from nurbsfeed.gcode.linuxcnc import G52BlockReader
 from nurbsfeed.gcode.modal import AXES, G5_2, G5_3, G6_2, NO_POSITION_EFFECT, ModalState
 from nurbsfeed.gcode.nurbs_block import FinishedCurve, first_word, motion_words
@@ -179,8 +179,12 @@ class _Reader:
             raise InputError("G5.3 without G5.2 first (LinuxCNC: Cannot use G5.3 without G5.2 "
                              "first)", state.where(g[G5_3]))
         previous = self.last_curve
-        if (state.motion != G6_2 or previous is None or state.cycle is not None
-                or motion_words(block)):
+        if state.motion != G6_2 or previous is None:
+            stray = None if g else stray_knot(block, state)
+            if stray is not None:
+                raise stray
+            return None
+        if state.cycle is not None or motion_words(block):
             return None
         knot = block.first("K")
         axes = [word for word in block.words if word.letter in AXES]

@@ -1,0 +1,1 @@
+"""The fuzzing tier (README "Fuzzing"): generated and mutated inputs through the CLI."""

@@ -1,0 +1,34 @@
+"""Failures the fuzzer finds in code under rewrite elsewhere (findings/README.md): the pytest
+slice tolerates these, and only these, so that the suite stays green until their fixes are
+merged; `python -m tests.fuzz` still counts them as failures, labelled "known".
+
+Each entry: (finding name, regex on the problem text). Delete an entry once its fix is merged:
+the slice then fails if the bug comes back.
+"""
+
+from __future__ import annotations
+
+import re
+
+KNOWN_FINDINGS = [
+    ("json-deep-nesting", r"in\.json: internal error: RecursionError"),
+    ("json-huge-integer", r"in\.json: internal error: (ValueError: Exceeds the limit|"
+                          r"OverflowError: int too large)"),
+    ("profile-huge-integer", r"nurbsfeed: internal error: OverflowError: int too large"),
+    ("profile-extreme-values (known before)",
+     r"profile[^/]*/in\.ngc: internal error: (OverflowError|ZeroDivisionError)|"
+     r"RuntimeWarning: overflow"),
+    ("degenerate-curve-zero-division", r"internal error: ZeroDivisionError: division by zero"),
+    ("degenerate-curve-hang", r"^hang: "),
+    ("corner-tangential-jerk / inch-path-deviation",
+     r"^nurbsfeed check: exit 1: (.*\n)*(tangential jerk|path deviation) .* [1-9][0-9]* +\S+:"
+     r"\d+\n"),
+]
+
+
+def known_finding(problem: str) -> str | None:
+    """The name of the known finding `problem` is, or None for a new failure."""
+    for name, pattern in KNOWN_FINDINGS:
+        if re.search(pattern, problem):
+            return name
+    return None

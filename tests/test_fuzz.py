@@ -1,0 +1,94 @@
+"""A derandomized slice of the fuzzing tier (README "Fuzzing"): a few hundred generated and
+mutated inputs through `nurbsfeed convert`, each of which must convert into a program that keeps
+every other line, or be refused with a located message and no output (tests/fuzz/oracle.py).
+Failures recorded in tests/fuzz/findings/ (code owned elsewhere) are tolerated, no others.
+
+The oracle itself is tested first, on outputs broken on purpose: a pass-through check that
+cannot fail would make the slice worthless.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, Phase, given, settings
+
+from tests.conftest import SAMPLES
+from tests.fuzz.known import known_finding
+from tests.fuzz.oracle import check_case, pass_through_problem, run_cli
+from tests.fuzz.strategies import FAMILIES
+
+SLICE = {"gcode": 80, "json": 50, "profile": 30, "samples": 80}
+
+
+@pytest.mark.parametrize("family", list(SLICE))
+def test_fuzz_slice(family: str, tmp_path_factory: pytest.TempPathFactory) -> None:
+    folder = tmp_path_factory.mktemp(family)
+    checked = []
+
+    @settings(max_examples=SLICE[family], derandomize=True, database=None, deadline=None,
+              phases=[Phase.generate], suppress_health_check=list(HealthCheck))
+    @given(FAMILIES[family])
+    def case_holds(case) -> None:
+        outcome = check_case(folder, case.name, case.data, case.profile,
+                             check_motion=case.valid and len(checked) % 10 == 0
+                             and b"\n" in case.data)
+        problem = outcome.problem
+        if problem is None and case.valid and outcome.exit_code != 0:
+            problem = f"a valid input was refused: {outcome.stderr.strip()}"
+        checked.append(outcome.exit_code)
+        assert problem is None or known_finding(problem), problem
+
+    case_holds()
+    assert len(checked) == SLICE[family]
+    assert checked.count(0) >= SLICE[family] // 5  # a good share really converts
+
+
+PROGRAM = (SAMPLES / "fanuc-quadratic.nc").read_bytes()
+
+
+def converted(tmp_path: Path) -> bytes:
+    source, target = tmp_path / "in.nc", tmp_path / "out.nc"
+    source.write_bytes(PROGRAM)
+    code, stderr, crash = run_cli(["convert", str(source), "-o", str(target)])
+    assert (code, crash) == (0, ""), stderr
+    return target.read_bytes()
+
+
+def test_the_oracle_accepts_a_real_conversion(tmp_path: Path) -> None:
+    assert pass_through_problem(PROGRAM, converted(tmp_path)) is None
+    outcome = check_case(tmp_path, "in.nc", PROGRAM, check_motion=True)
+    assert (outcome.exit_code, outcome.problem) == (0, None)
+
+
+@pytest.mark.parametrize(("edit", "message"), [
+    (lambda out: out.replace(b"N160 G0 Z5.\n", b""), "not the input"),
+    (lambda out: out.replace(b"N30 G0 G54", b"N30 G0  G54"), "not in the input"),
+    (lambda out: out.replace(b"N170 M9\nN180 M5\n", b"N180 M5\nN170 M9\n"), "not the input"),
+    (lambda out: out.replace(b"N150 G1 X70. F1500.\n", b""), "not the input"),
+    (lambda out: out.replace(b"\nN190 G91 G28 Z0.\n", b"\n"), "not the input"),
+    (lambda out: out.replace(b"X0.0001 Y0.0002", b"X1 Y0.0002", 1), "without its point"),
+    (lambda out: out.replace(b"\n", b"\r\n", 3), "not in the input"),
+], ids=["line-dropped", "line-changed", "lines-swapped", "line-after-block-dropped",
+        "G91-line-dropped", "no-decimal-point", "line-ending-changed"])
+def test_the_oracle_catches_a_broken_pass_through(tmp_path: Path, edit, message: str) -> None:
+    out = converted(tmp_path)
+    broken = edit(out)
+    assert broken != out
+    assert message in (pass_through_problem(PROGRAM, broken) or "")
+
+
+def test_the_oracle_catches_a_missing_block_line_kept(tmp_path: Path) -> None:
+    program = PROGRAM.replace(b"N90 K0. X40. Y-10.\n", b"N90 K0. X40. Y-10.\n(kept)\n")
+    source, target = tmp_path / "in.nc", tmp_path / "out.nc"
+    source.write_bytes(program)
+    assert run_cli(["convert", str(source), "-o", str(target)])[0] == 0
+    out = target.read_bytes()
+    assert pass_through_problem(program, out) is None
+    assert "not the input" in pass_through_problem(program, out.replace(b"(kept)\n", b""))
+
+
+def test_the_oracle_reports_a_timeout() -> None:
+    code, _, crash = run_cli(["--help"], time_limit_s=1e-6)
+    assert code is None and crash.startswith("timeout")

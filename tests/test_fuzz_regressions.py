@@ -1,0 +1,118 @@
+"""Bugs the fuzzing tier (tests/fuzz, README "Fuzzing") found in the G-code readers, one test
+each, through the command line as the fuzzer saw them."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from nurbsfeed.cli import main
+
+HEAD = "G21 G90 G0 X0 Y0\nF100\n"
+
+
+def refused(tmp_path: Path, text: str, name: str = "in.nc") -> str:
+    """Convert `text`; it must be refused with exit 2 and no output: the message."""
+    source = tmp_path / name
+    source.write_bytes(text.encode("utf-8", "surrogateescape"))
+    target = tmp_path / "out.nc"
+    result = CliRunner().invoke(main, ["convert", str(source), "-o", str(target)])
+    assert result.exit_code == 2, result.output
+    assert not target.exists()
+    assert "internal error" not in result.stderr
+    return result.stderr.strip().removeprefix(str(source))
+
+
+@pytest.mark.parametrize(("line", "message"), [
+    ("X#" + "9" * 5000, ":3:2: #99999999...: parameter numbers go from 0 to 999999"),
+    ("#" + "9" * 5000 + "=5", ":3:1: #99999999...: parameter numbers go from 0 to 999999"),
+    ("#1=#1000000", ":3:4: #1000000: parameter numbers go from 0 to 999999"),
+    ("G1 X- # 1234567", ":3:7: #1234567: parameter numbers go from 0 to 999999"),
+])
+def test_a_parameter_number_of_thousands_of_digits_is_refused_at_its_place(
+        tmp_path: Path, line: str, message: str) -> None:
+    """int() of a 5000-digit string raises ValueError (Python's 4300-digit limit): it was an
+    internal error."""
+    assert refused(tmp_path, HEAD + line + "\n") == message
+
+
+def test_the_largest_parameter_number_and_leading_zeros_are_read(tmp_path: Path) -> None:
+    source = tmp_path / "in.nc"
+    source.write_text(HEAD + "#999999=5.\n#0007=2.5\nG1 X#999999 Y#7\n")
+    result = CliRunner().invoke(main, ["convert", str(source), "-o", str(tmp_path / "o.nc")])
+    assert result.exit_code == 0, result.stderr
+    assert (tmp_path / "o.nc").read_text() == source.read_text()
+
+
+def test_a_bug_while_loading_a_profile_is_one_line_not_a_traceback(tmp_path: Path) -> None:
+    """A 400-digit integer in a profile raised OverflowError in the profile check, outside any
+    conversion: the traceback reached the user (tests/fuzz/findings/profile-huge-integer.yaml;
+    the profile loader should refuse it at its line; until then it is an internal error)."""
+    profile = Path(__file__).parent / "fuzz" / "findings" / "profile-huge-integer.yaml"
+    source = tmp_path / "in.ngc"
+    source.write_text("G17 G21 G0 X0 Y0\nM2\n")
+    result = CliRunner().invoke(main, ["convert", str(source), "-m", str(profile), "-o",
+                                       str(tmp_path / "out.nc")])
+    assert result.exit_code == 2
+    assert "Traceback" not in result.stderr and result.stderr.count("\n") == 1, result.stderr
+    assert not (tmp_path / "out.nc").exists()
+
+
+def test_usage_errors_are_still_clicks_own(tmp_path: Path) -> None:
+    result = CliRunner().invoke(main, ["convert", "a.nc", "b.nc"])
+    assert result.exit_code == 2
+    assert result.stderr.endswith("Error: several inputs need -o DIR\n")
+
+
+FANUC_CURVE = "G06.2 P3 K0 X0 Y0 Z0\nK0 X1 Y1\nK0 X2 Y0\nK1\nK1\nK1\nM30\n"
+G62_CURVE = "G6.2 P3 Q1 K0 X0 Y0 Z0\nK0 X1 Y1\nK0 X2 Y0\nG6.2 K1\nG6.2 K1\nG6.2 K1\nM2\n"
+
+
+@pytest.mark.parametrize(("typo", "curve", "message"), [
+    ("G06.3", FANUC_CURVE, ":3:1: G06.3 is a G code nurbsfeed does not know, and K0 on line 4 is "
+                           "a knot of a curve nothing opened: write G06.2 to open it"),
+    ("G6", FANUC_CURVE, ":3:1: G6 is a G code nurbsfeed does not know, and K0 on line 4"),
+    ("G062", FANUC_CURVE, ":3:1: G062 is a G code nurbsfeed does not know, and K0 on line 4"),
+    ("G6.3", G62_CURVE, ":3:1: G6.3 is a G code nurbsfeed does not know, and K0 on line 4"),
+])
+def test_a_mistyped_g06_2_is_refused_at_its_own_line(tmp_path: Path, typo: str, curve: str,
+                                                     message: str) -> None:
+    """The curve's control points passed through as straight G0 moves (G062 is Fanuc's G62,
+    corner override): nothing was refused. Now the first knot blames the unknown code."""
+    text = HEAD + curve.replace(curve.split()[0], typo, 1)
+    assert refused(tmp_path, text, "in.ngc").startswith(message)
+
+
+def test_a_g6_2_block_without_its_point_after_a_typo_blames_the_typo(tmp_path: Path) -> None:
+    """The G6.2 of the first knot-only line opened a curve: the message blamed that line, three
+    lines after the G code that should have been G6.2."""
+    text = HEAD + "G6.3 P3 Q1\nG6.2 K1\n"
+    assert refused(tmp_path, text, "in.ngc") == (
+        ":3:1: G6.3 is a G code nurbsfeed does not know, and the G06.2 on line 4 has no control "
+        "point: write G06.2 to open the curve")  # no Q word: read as Fanuc's
+    assert refused(tmp_path, HEAD + "G6.2 K1\n", "in.ngc") == (
+        ":3:1: the first block of a G06.2 curve needs its first control point (X, Y or Z)")
+
+
+@pytest.mark.parametrize(("line", "message"), [
+    ("K1.", ":3:1: K1.: a NURBS knot with no G06.2 curve open (under G0/G1 K means nothing): "
+            "write G06.2 on the curve's first block"),
+    ("N5 K0 X1 Y1 R2", ":3:4: K0: a NURBS knot with no G06.2 curve open"),
+])
+def test_a_knot_with_no_curve_open_is_refused(tmp_path: Path, line: str, message: str) -> None:
+    assert refused(tmp_path, HEAD + line + "\n").startswith(message)
+
+
+@pytest.mark.parametrize("program", [
+    "G18 G21 G90 G0 X0 Z0\nF100\nG2 X0 Z0 K5.\nK5.\n",  # G2/G3: K is the arc centre
+    "G17 G21 G90 G0 X0 Y0 Z5.\nF100\nG81 X1. Y1. Z-1. R1. K3\nK2\nG80\n",  # a cycle's repeats
+    "G17 G21 G90 G0 X0 Y0\nF100\nG1 X1 K0\n",  # a K with a G code in its block: not ours
+])
+def test_k_words_where_they_mean_something_pass_through(tmp_path: Path, program: str) -> None:
+    source = tmp_path / "in.nc"
+    source.write_text(program)
+    result = CliRunner().invoke(main, ["convert", str(source), "-o", str(tmp_path / "o.nc")])
+    assert result.exit_code == 0, result.stderr
+    assert (tmp_path / "o.nc").read_text() == program
