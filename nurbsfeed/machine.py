@@ -60,20 +60,32 @@ MAX_PROFILE_BYTES = 1 << 20
 MAX_PROFILE_NODES = 1000
 
 
+def _shown(value: Any) -> str:
+    """`value` for a message: a huge integer by its size (Python will not even print one of
+    more than 4300 digits)."""
+    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 64:
+        digits = int(value.bit_length() * math.log10(2)) + 1  # at most one too many
+        if abs(value) < 10 ** (digits - 1):
+            digits -= 1
+        return f"an integer of {digits} digits"
+    return repr(value)
+
+
 def _check_value(key: str, value: Any) -> float | int:
     """One key's value, checked; ProfileError (without a place) when it is not valid."""
     low, high = RANGES[key]
     if key in INT_KEYS:
         if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
             raise ProfileError(f"'{key}' must be a whole number from {low} to {high}, "
-                               f"not {value!r}")
+                               f"not {_shown(value)}")
         return value
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ProfileError(f"'{key}' must be a number, not {value!r}")
-    if not math.isfinite(value) or value <= 0:
-        raise ProfileError(f"'{key}' must be positive and finite, not {value!r}")
+        raise ProfileError(f"'{key}' must be a number, not {_shown(value)}")
+    # compared before any conversion: an integer beyond a float's range is just out of range
+    if isinstance(value, float) and not math.isfinite(value) or value <= 0:
+        raise ProfileError(f"'{key}' must be positive and finite, not {_shown(value)}")
     if not low <= value <= high:
-        raise ProfileError(f"'{key}' must be from {low:g} to {high:g}, not {value!r}")
+        raise ProfileError(f"'{key}' must be from {low:g} to {high:g}, not {_shown(value)}")
     return float(value)
 
 
@@ -155,7 +167,15 @@ class _ProfileLoader(yaml.SafeLoader):
             seen.add(key)
         return super().construct_mapping(node, deep=deep)
 
+    def construct_yaml_int(self, node: yaml.ScalarNode) -> int:
+        try:
+            return super().construct_yaml_int(node)  # type: ignore[no-any-return]
+        except ValueError:  # more digits than Python converts (sys.get_int_max_str_digits)
+            raise _NotAProfile(problem="an integer too long to be a number",
+                               problem_mark=node.start_mark) from None
 
+
+_ProfileLoader.add_constructor("tag:yaml.org,2002:int", _ProfileLoader.construct_yaml_int)
 _ProfileLoader.add_implicit_resolver(
     "tag:yaml.org,2002:float",
     re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),

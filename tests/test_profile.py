@@ -126,3 +126,22 @@ def test_a_profile_file_above_the_size_bound_is_refused_before_parsing(tmp_path:
     code, _, stderr = run("convert", str(SOURCE), "-m", str(path))
     assert (code, stderr) == (2, f"{path}: a machine profile of more than {MAX_PROFILE_BYTES} "
                                  "bytes: it is a flat mapping of a few numbers\n")
+
+
+@pytest.mark.parametrize("key", ["max_acc_mm_s2", "decimals"])
+@pytest.mark.parametrize(("digits", "what"), [
+    (400, "must be {range}, not an integer of 400 digits"),  # beyond a float's range
+    (5000, "an integer too long to be a number"),  # beyond what Python converts from text
+])
+def test_an_integer_of_hundreds_or_thousands_of_digits_is_refused_at_its_place(
+        tmp_path: Path, key: str, digits: int, what: str) -> None:
+    path, line = profile_with(tmp_path, key, "9" * digits)
+    low, high = RANGES[key]
+    span = f"a whole number from {low} to {high}" if key in INT_KEYS else f"from {low:g} to {high:g}"
+    out = tmp_path / "q.nc"
+    code, stdout, stderr = run("convert", str(SOURCE), "-m", str(path), "-o", str(out))
+    assert (code, stdout) == (2, "") and not out.exists()
+    if digits == 400:
+        assert stderr == f"{path}:{line}:1: '{key}' {what.format(range=span)}\n"
+    else:  # the YAML scalar itself, after the key
+        assert stderr == f"{path}:{line}:{len(key) + 3}: {what}\n"

@@ -11,13 +11,6 @@ from __future__ import annotations
 import re
 
 KNOWN_FINDINGS = [
-    ("json-deep-nesting", r"in\.json: internal error: RecursionError"),
-    ("json-huge-integer", r"in\.json: internal error: (ValueError: Exceeds the limit|"
-                          r"OverflowError: int too large)"),
-    ("profile-huge-integer", r"nurbsfeed: internal error: OverflowError: int too large"),
-    ("profile-extreme-values (known before)",
-     r"profile[^/]*/in\.ngc: internal error: (OverflowError|ZeroDivisionError)|"
-     r"RuntimeWarning: overflow"),
     ("degenerate-curve-zero-division", r"internal error: ZeroDivisionError: division by zero"),
     ("degenerate-curve-hang", r"^hang: "),
     ("corner-tangential-jerk / inch-path-deviation",
