@@ -16,14 +16,22 @@ import signal
 import stat
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import click
 
 from nurbsfeed import __version__
-from nurbsfeed.errors import (EXIT_BAD_INPUT, EXIT_BROKEN_PIPE, EXIT_SIGNAL_BASE, InputError,
-                              Interrupted, Location, NurbsfeedError)
+from nurbsfeed.errors import (
+    EXIT_BAD_INPUT,
+    EXIT_BROKEN_PIPE,
+    EXIT_SIGNAL_BASE,
+    InputError,
+    Interrupted,
+    Location,
+    NurbsfeedError,
+)
 from nurbsfeed.interpolate import METHODS
 from nurbsfeed.machine import FLOAT_KEYS, INT_KEYS, Machine, load_machine
 from nurbsfeed.readers import DIALECTS, read_program
@@ -301,9 +309,9 @@ def _pool_round(todo: list[int], jobs: int, sources: list[Path], targets: list[P
                 ) -> tuple[list[int], list[int]]:
     """Convert files `todo` into `results` until done or the pool breaks: (files in flight when
     it broke, files not handed out)."""
+    import multiprocessing
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
-    import multiprocessing
 
     waiting = todo[::-1]
     lost: list[int] = []
@@ -326,7 +334,8 @@ def _pool_round(todo: list[int], jobs: int, sources: list[Path], targets: list[P
         except Interrupted as exc:
             pool.shutdown(wait=False, cancel_futures=True)
             for child in multiprocessing.active_children():
-                os.kill(child.pid, exc.signum)  # each removes its temporary files and ends
+                if child.pid is not None:  # (started: active children always are)
+                    os.kill(child.pid, exc.signum)  # each removes its temporary files and ends
             raise
     return lost, waiting[::-1]
 
@@ -574,7 +583,6 @@ def plot(input: Path, output: Path, curve_index: int, method: str, dialect: str,
         click.echo(PLOT_NEEDS_MATPLOTLIB, err=True)
         sys.exit(EXIT_BAD_INPUT)
     from nurbsfeed.analysis import curve_run, run_series
-
     from nurbsfeed.files import output_target
 
     if _file_id(output) is not None and _same_file(input, output):

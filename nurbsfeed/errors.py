@@ -42,7 +42,7 @@ class InputError(NurbsfeedError):
         self.message = message
         self.location = location
 
-    def at(self, location: Location) -> "InputError":
+    def at(self, location: Location) -> InputError:
         """The same error, placed at `location` unless it already has a place."""
         if self.location is not None:
             return self

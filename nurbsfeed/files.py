@@ -23,8 +23,9 @@ import shutil
 import signal
 import stat
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
-from typing import BinaryIO, Iterator
+from typing import BinaryIO, cast
 
 from nurbsfeed.errors import InputError, Location
 
@@ -52,10 +53,10 @@ class InputFile:
                     if stat.S_ISREG(os.fstat(handle.fileno()).st_mode):
                         self.head = handle.read(LOOK_AHEAD_BYTES)
                         return
-                    self.content = handle.read()
+                    content = self.content = handle.read()
             except OSError as exc:
                 raise _cannot_read(path, exc) from None
-        self.head = self.content[:LOOK_AHEAD_BYTES]
+        self.head = content[:LOOK_AHEAD_BYTES]
 
     def _open(self) -> BinaryIO:
         if self.content is not None:
@@ -70,9 +71,7 @@ class InputFile:
         cr_only = b"\n" not in self.head and b"\r" in self.head
         text = io.TextIOWrapper(self._open(), ENCODING, ERRORS, newline="\r" if cr_only else "\n")
         with text:
-            number = 0
-            for line in _reporting_read_errors(self.path, text):
-                number += 1
+            for number, line in enumerate(_reporting_read_errors(self.path, text), start=1):
                 if cr_only and "\n" in line:
                     raise InputError("a line ending in LF in a file whose lines end in CR alone "
                                      "(classic Mac OS): write every line ending the same way",
@@ -170,27 +169,28 @@ def atomic_output(path: Path | None) -> Iterator[BinaryIO]:
     """
     final, through = output_target(path) if path is not None else (None, False)
     folder = final.parent if final is not None and not through else None
+    prefix = f".{final.name}." if final is not None and folder else "nurbsfeed."
     # A stop signal (cli turns it into an exception) between creating the file and holding its
     # name would leave it behind: held until the cleanup below knows the name.
     handle = None
     held = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
     try:
         try:
-            handle = tempfile.NamedTemporaryFile(
-                "w+b", dir=folder, prefix=f".{final.name}." if folder else "nurbsfeed.",
+            handle = tempfile.NamedTemporaryFile(  # noqa: SIM115 (closed and removed below)
+                "w+b", dir=folder, prefix=prefix,
                 suffix=".part", delete=False)
         finally:
             signal.pthread_sigmask(signal.SIG_SETMASK, held)
         with handle:
-            yield handle
+            yield cast(BinaryIO, handle)
             handle.flush()
-            if through:
+            if through and final is not None:
                 handle.seek(0)
                 with open(os.open(final, os.O_WRONLY | os.O_APPEND), "ab") as sink:
                     shutil.copyfileobj(handle, sink, 1 << 20)
             elif final is not None:
                 os.fsync(handle.fileno())
-        if folder is not None:
+        if folder is not None and final is not None:
             if os.path.lexists(final) and not stat.S_ISREG(os.lstat(final).st_mode):
                 raise InputError("cannot write output: it is no longer a regular file",
                                  Location(str(path)))  # swapped since output_target looked

@@ -25,7 +25,7 @@ def _numba_njit() -> Callable[[F], F] | None:
         import numba
     except ImportError:
         return None
-    return numba.njit(cache=True, nogil=True)  # type: ignore[no-any-return]
+    return numba.njit(cache=True, nogil=True)  # type: ignore[return-value]
 
 
 _njit = _numba_njit()

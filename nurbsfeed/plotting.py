@@ -18,13 +18,13 @@ from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 
 from nurbsfeed.analysis import PAPER_TABLE2, RunSeries
-from nurbsfeed.interpolate import Interpolation
 from nurbsfeed.files import atomic_output
+from nurbsfeed.interpolate import Interpolation
 from nurbsfeed.planning.planner import KIND_NAMES, Plan
 
 LIMIT_STYLE = {"color": "tab:red", "linestyle": "--", "linewidth": 1.2}
-KIND_MARKERS = {"end": ("s", "black"), "peak": ("^", "tab:red"), "corner": ("X", "black"), "cusp": ("P", "black"),
-                "feed": ("D", "tab:blue"), "hold": ("o", "tab:orange")}
+KIND_MARKERS = {"end": ("s", "black"), "peak": ("^", "tab:red"), "corner": ("X", "black"),
+                "cusp": ("P", "black"), "feed": ("D", "tab:blue"), "hold": ("o", "tab:orange")}
 DPI = 110
 LEGEND_HEADROOM = 1.3  # the y axis reaches this far above the limit: the legend sits there
 
@@ -60,7 +60,7 @@ def plot_run(target: Path, plan: Plan, result: Interpolation, series: RunSeries,
     # path, coloured by the planned feed, with the key points
     xy = result.points[:, :2]
     segments = np.stack([xy[:-1], xy[1:]], axis=1)
-    lines = LineCollection(segments, cmap="viridis", linewidths=2.0)
+    lines = LineCollection(list(segments), cmap="viridis", linewidths=2.0)
     lines.set_array(0.5 * (series.planned_v_mm_s[:-1] + series.planned_v_mm_s[1:]))
     path_ax.add_collection(lines)
     fig.colorbar(lines, ax=path_ax, label=f"planned feed [{u}/s]", shrink=0.85)

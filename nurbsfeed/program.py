@@ -52,7 +52,7 @@ class CurveBlock:
     feed_mm_s: np.ndarray = field(default_factory=lambda: np.empty(0))
     lengths_in_mm: bool = False  # True once `in_mm` has converted curve and feed_mm_s
 
-    def in_mm(self) -> "CurveBlock":
+    def in_mm(self) -> CurveBlock:
         """This block with its lengths in mm: the form every stage after reading takes. The
         knots, weights and feed_u are not lengths and stay as read."""
         if self.lengths_in_mm:

@@ -1,7 +1,8 @@
 """A textbook NURBS evaluator that lives only in the tests: the oracle for nurbsfeed.geometry.
 
 Cox-de Boor recursion straight from the definition (paper Eq. 2) with the 0/0 := 0 convention,
-derivatives of the basis from N'_{i,p} = p/(u_{i+p}-u_i) N_{i,p-1} - p/(u_{i+p+1}-u_{i+1}) N_{i+1,p-1},
+derivatives of the basis from
+N'_{i,p} = p/(u_{i+p}-u_i) N_{i,p-1} - p/(u_{i+p+1}-u_{i+1}) N_{i+1,p-1},
 and the quotient rule for the rational curve. Slow and obviously right.
 """
 

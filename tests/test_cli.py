@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import csv
-import re
 import difflib
 import io
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path

@@ -21,9 +21,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import nurbsfeed.pipeline
+from nurbsfeed import files
 from nurbsfeed.cli import main
 from nurbsfeed.errors import InputError, Interrupted
-from nurbsfeed import files
 from nurbsfeed.files import InputFile, atomic_output, output_target
 from tests.bench.programs import json_program
 from tests.conftest import SAMPLES
@@ -102,8 +102,8 @@ def test_a_killed_worker_fails_only_the_file_that_killed_it(
     code, _, stderr = run("convert", *inputs, "-o", out, "--jobs", "2")
     assert code == 2
     assert listing(out)[-3:] == ["butterfly.nc", "circle.nc", "quarter-circle.nc"]
-    assert f"FAILED: internal error: BrokenProcessPool: the worker process converting this " \
-           f"file died (killed by a signal, or out of memory)" in stderr
+    assert "FAILED: internal error: BrokenProcessPool: the worker process converting this " \
+           "file died (killed by a signal, or out of memory)" in stderr
     assert stderr.endswith("3 of 4 files converted\n")
 
 
@@ -250,10 +250,9 @@ def test_atomic_output_removes_its_temporary_file_on_every_way_out(tmp_path: Pat
                                                                    exc: BaseException) -> None:
     target = tmp_path / "out.nc"
     target.write_text("before")
-    with pytest.raises(type(exc)):
-        with atomic_output(target) as out:
-            out.write(b"partial")
-            raise exc
+    with pytest.raises(type(exc)), atomic_output(target) as out:
+        out.write(b"partial")
+        raise exc
     assert listing(tmp_path) == ["out.nc"] and target.read_text() == "before"
     with atomic_output(target) as out:
         out.write(b"after")
@@ -314,7 +313,8 @@ def test_a_signal_stops_every_worker_of_a_parallel_batch(tmp_path: Path,
 # ---- stdout closed or gone ----
 
 def test_a_closed_stdout_is_a_message_not_a_traceback() -> None:
-    done = subprocess.run(CLI + ["convert", str(QUARTER)], stderr=subprocess.PIPE, text=True, preexec_fn=lambda: os.close(1))
+    done = subprocess.run(CLI + ["convert", str(QUARTER)], stderr=subprocess.PIPE, text=True,
+                          preexec_fn=lambda: os.close(1))
     assert (done.returncode, done.stderr) == (
         2, "-: cannot write output (standard output is closed)\n")
 
@@ -367,8 +367,8 @@ def test_a_program_from_a_pipe_converts_like_the_file(tmp_path: Path) -> None:
     """`nurbsfeed convert <(command)`: a pipe is read once, whole, however often it is read."""
     for sample in (SAMPLES / "fanuc-quadratic.nc", QUARTER):
         read_end, write_end = os.pipe()
-        writer = threading.Thread(target=lambda: (os.write(write_end, sample.read_bytes()),
-                                                  os.close(write_end)))
+        writer = threading.Thread(target=lambda end=write_end, source=sample: (
+            os.write(end, source.read_bytes()), os.close(end)))
         writer.start()
         try:
             piped = tmp_path / f"piped-{sample.name}.nc"

@@ -12,8 +12,8 @@ from click.testing import CliRunner
 from nurbsfeed.cli import main
 from nurbsfeed.errors import CurveError
 from nurbsfeed.files import InputFile
-from nurbsfeed.readers.gcode import read_gcode
 from nurbsfeed.program import CurveBlock, PassThrough
+from nurbsfeed.readers.gcode import read_gcode
 from tests.conftest import SAMPLES
 
 

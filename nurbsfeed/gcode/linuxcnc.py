@@ -80,8 +80,8 @@ class G52BlockReader:
         # The held axis is never written (its moves stay constant, MoveWriter writes changed
         # axes only), so an unknown one is held at 0 internally and stays unknown after the
         # block. An unknown plane axis is reported at G5.3, once every line's own checks ran.
-        self.origin = {axis: 0.0 if state.pos[axis].value is None else state.pos[axis].value
-                       for axis in AXES}
+        self.origin: dict[str, float] = {
+            axis: 0.0 if (value := state.pos[axis].value) is None else value for axis in AXES}
         self.unknown_start = next((axis for axis in self.plane_axes
                                    if state.pos[axis].value is None), None)
         self.points: list[tuple[float, float, float]] = [

@@ -152,7 +152,7 @@ def check_coordinates(points: list[tuple[float, float, float]], lines: list[int]
     far = far_control_point(np.array(points))
     if far is not None:
         where = start if far == 0 else Location(start.file, lines[far], 1)
-        raise CurveError(far_message(far, points[far]), where)
+        raise CurveError(far_message(far, np.array(points[far])), where)
 
 
 def count(n: int, noun: str) -> str:

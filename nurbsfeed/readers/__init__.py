@@ -7,8 +7,8 @@ the item being read, never the file.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 from nurbsfeed.files import InputFile
 from nurbsfeed.program import ProgramItem

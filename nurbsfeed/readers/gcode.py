@@ -37,11 +37,11 @@ from pathlib import Path
 
 from nurbsfeed.errors import InputError, Location
 from nurbsfeed.files import BOM
+from nurbsfeed.gcode import point_lines
 from nurbsfeed.gcode.fanuc import NurbsCurveReader, stray_knot
 from nurbsfeed.gcode.linuxcnc import G52BlockReader
 from nurbsfeed.gcode.modal import AXES, G5_2, G5_3, G6_2, NO_POSITION_EFFECT, ModalState
 from nurbsfeed.gcode.nurbs_block import FinishedCurve, first_word, motion_words
-from nurbsfeed.gcode import point_lines
 from nurbsfeed.gcode.tokenizer import Block, Param, tokenize_line
 from nurbsfeed.program import CurveBlock, PassThrough, ProgramItem
 
@@ -134,8 +134,8 @@ class _Reader:
 
     def _take_run(self, ahead: _LookAhead, line: int) -> int:
         """`NurbsCurveReader.take_run` on the next lines (line number `line` on), at most
-        point_lines.RUN_LINES of them and only as far as they are ASCII (where string and byte positions
-        agree; a point line is ASCII): the number of lines it read, now consumed."""
+        point_lines.RUN_LINES of them and only as far as they are ASCII (where string and byte
+        positions agree; a point line is ASCII): the number of lines it read, now consumed."""
         assert isinstance(self.open, NurbsCurveReader), "called inside a G06.2 / G6.2 curve"
         batch = ahead.peek(point_lines.RUN_LINES)
         n_ascii = next((i for i, text in enumerate(batch) if not text.isascii()), len(batch))

@@ -93,7 +93,8 @@ def row(label: str, values) -> None:
 def degree_sweep() -> None:
     print("degree (knots [0,1], |P| <= 1, weights 1, up to 5 interior knots)")
     for degree in (1, 2, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25):
-        row(f"degree {degree}", worst(lambda rng: (degree, *random_fields(rng, degree))))
+        row(f"degree {degree}",
+            worst(lambda rng, degree=degree: (degree, *random_fields(rng, degree))))
     print("degree, LinuxCNC uniform integer knots (G6.2 P / G5.2 L), 2 * order control points")
     from nurbsfeed.gcode.linuxcnc import uniform_knots
     for degree in (3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23):

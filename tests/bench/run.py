@@ -33,9 +33,9 @@ from pathlib import Path
 import numpy as np
 
 from nurbsfeed.interpolate import METHODS, SLOW_SPEED_REL, step_spans
-from nurbsfeed.readers.json_curves import read_json_curves
 from nurbsfeed.machine import load_machine
 from nurbsfeed.planning.planner import plan_curve
+from nurbsfeed.readers.json_curves import read_json_curves
 from tests.bench.programs import fanuc_program, write_pass_through_program
 from tests.conftest import law_increments
 
