@@ -18,9 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from nurbsfeed.analysis.check.projection import project_points
-from nurbsfeed.machine import MM_PER_INCH
 from nurbsfeed.pipeline import read_program
-from nurbsfeed.program import CurveBlock
+from nurbsfeed.program import MM_PER_INCH, CurveBlock
 from tests.linuxcnc.programs import WrittenCurve, written_curves
 from tests.linuxcnc.run_sim import SERVO_PERIOD_S
 
