@@ -122,8 +122,8 @@ def machine_options(func: Callable[..., Any]) -> Callable[..., Any]:
                             type=int if key in INT_KEYS else float, default=None,
                             help=f"Override the profile's {key}.")(func)
     return click.option("--machine", "-m", default="default", show_default=True,
-                        help="Machine profile: a built-in name (default, paper-table1) or a "
-                             "YAML file.")(func)
+                        help="Machine profile: a built-in name (default, linuxcnc, "
+                             "paper-table1) or a YAML file.")(func)
 
 
 def machine_from(kwargs: dict[str, Any]) -> Machine:

@@ -25,12 +25,22 @@ from nurbsfeed.planning.limits import Limits
 class Machine:
     """One machine (design §4): its kinematic limits, in mm and s, and the output settings."""
 
+    # limits.period_s is the duration of one written move: move_periods controller periods
     limits: Limits
     # the longest planned cycle of one curve that is converted: a longer one is refused (a
     # mistyped feed or period would otherwise step for hours)
     max_curve_time_s: float = 3600.0
-    decimals: int = 4  # coordinate decimals in mm programs (inch programs: one more)
+    # coordinate decimals in mm programs (inch programs: one more): the profile's, or
+    # `auto_decimals` when it gives none
+    decimals: int = 4
     feed_decimals: int = 3  # F word decimals (more when F is small; see gcode.writer)
+    move_periods: int = 1  # controller periods per written move
+    min_block_time_s: float = 0.0  # the controller's floor on one block's time
+
+    @property
+    def controller_period_s(self) -> float:
+        """The profile's period_s: the controller's interpolation (servo) period."""
+        return self.limits.period_s / self.move_periods
 
 
 # profile key -> the Limits field it sets (the keys say "max", the fields are the limits)
@@ -38,9 +48,9 @@ LIMIT_KEYS = {"period_s": "period_s", "max_feed_mm_s": "feed_mm_s",
               "chord_error_mm": "chord_mm", "max_acc_mm_s2": "acc_mm_s2",
               "max_jerk_mm_s3": "jerk_mm_s3", "max_normal_acc_mm_s2": "normal_acc_mm_s2",
               "max_normal_jerk_mm_s3": "normal_jerk_mm_s3"}
-REQUIRED_KEYS = tuple(LIMIT_KEYS)  # the others have the Machine's default
-FLOAT_KEYS = REQUIRED_KEYS + ("max_curve_time_s",)
-INT_KEYS = ("decimals", "feed_decimals")
+REQUIRED_KEYS = tuple(LIMIT_KEYS)  # the others have the Machine's default (decimals: auto)
+FLOAT_KEYS = REQUIRED_KEYS + ("max_curve_time_s", "min_block_time_s")
+INT_KEYS = ("decimals", "feed_decimals", "move_periods")
 # The accepted values, ends included (README "Profile keys" says why each is physical).
 RANGES: dict[str, tuple[float, float]] = {
     "period_s": (1e-6, 1.0),
@@ -51,9 +61,20 @@ RANGES: dict[str, tuple[float, float]] = {
     "max_normal_acc_mm_s2": (1e-3, 1e7),
     "max_normal_jerk_mm_s3": (1e-3, 1e10),
     "max_curve_time_s": (1e-3, 1e6),
+    "min_block_time_s": (0.0, 1.0),
     "decimals": (0, 8),
     "feed_decimals": (0, 6),
+    "move_periods": (1, 1000),
 }
+MAX_MOVE_S = RANGES["period_s"][1]
+# a move this much (relative) shorter than min_block_time_s still meets it: 2 x 0.00051 is not
+# 0.00102 in binary
+FLOOR_MARGIN = 1e-9  # move_periods * period_s: the planner's period
+# Automatic output resolution (`auto_decimals`): the largest acceleration spike rounding may
+# put at a junction, as a share of the profile's smaller acceleration limit, and the farthest a
+# written point may be from the computed one, as a share of the chord tolerance.
+ROUNDING_SPIKE_SHARE = 0.01
+ROUNDING_CHORD_SHARE = 0.1
 # A profile is a flat mapping of ten numbers: these bounds are far above any real one, and far
 # below what makes a YAML parser slow.
 MAX_PROFILE_BYTES = 1 << 20
@@ -82,7 +103,7 @@ def _check_value(key: str, value: Any) -> float | int:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ProfileError(f"'{key}' must be a number, not {_shown(value)}")
     # compared before any conversion: an integer beyond a float's range is just out of range
-    if isinstance(value, float) and not math.isfinite(value) or value <= 0:
+    if isinstance(value, float) and not math.isfinite(value) or (value <= 0 and low > 0):
         raise ProfileError(f"'{key}' must be positive and finite, not {_shown(value)}")
     if not low <= value <= high:
         raise ProfileError(f"'{key}' must be from {low:g} to {high:g}, not {_shown(value)}")
@@ -120,8 +141,66 @@ def machine_from_mapping(data: Any, where: str, places: Mapping[str, Location] |
                 values[key] = _check_value(key, value)
             except ProfileError as exc:
                 raise ProfileError(f"option --{key.replace('_', '-')}: {exc.message}") from None
+    move_periods = int(values.get("move_periods", 1))
+    move_s = move_periods * values["period_s"]
+    if move_s > MAX_MOVE_S:
+        raise _refused(f"a written move of move_periods x period_s = {move_s:g} s: at most "
+                       f"{MAX_MOVE_S:g} s", ("move_periods", "period_s"), places, overrides,
+                       here)
+    floor_s = values.get("min_block_time_s", 0.0)
+    if move_s < floor_s * (1.0 - FLOOR_MARGIN):
+        needed = math.ceil(floor_s * (1.0 - FLOOR_MARGIN) / values["period_s"])
+        raise _refused(f"a written move of move_periods x period_s = {move_s * 1e3:g} ms is "
+                       f"shorter than min_block_time_s = {floor_s * 1e3:g} ms: the controller "
+                       "would stretch every move and not run the planned cycle; raise "
+                       f"move_periods to {needed}",
+                       ("move_periods", "min_block_time_s", "period_s"), places, overrides,
+                       here)
+    values["period_s"] = move_s  # what the planner, the stepping and the writer step by
     limits = Limits(**{field: values.pop(key) for key, field in LIMIT_KEYS.items()})
+    if "decimals" not in values:
+        values["decimals"] = auto_decimals(limits, limits.period_s / move_periods)
     return Machine(limits, **values)  # type: ignore[arg-type]
+
+
+def _refused(message: str, keys: tuple[str, ...], places: Mapping[str, Location],
+             overrides: Mapping[str, Any] | None, here: Location) -> ProfileError:
+    """The error of a check of several keys: at the options that set one of them, else at the
+    first of them in the file (else the profile)."""
+    options = [f"--{key.replace('_', '-')}" for key in keys
+               if (overrides or {}).get(key) is not None]
+    if options:
+        return ProfileError(f"option {', '.join(options)}: {message}")
+    return ProfileError(message, next((places[key] for key in keys if key in places), here))
+
+
+def auto_decimals(limits: Limits, controller_period_s: float) -> int:
+    """The fewest coordinate decimals (mm programs) at which rounding makes no junction a
+    controller reads as a corner and keeps the written points near the computed ones; at most
+    the profile's maximum (RANGES["decimals"]).
+
+    A coordinate written with d decimals is off by up to r = 10^-d / 2. One axis's velocity
+    over a move of duration D is off by up to 2r / D, and its change from one move to the next,
+    what a controller looks at where two moves meet, by up to 4r / D. A controller spreads that
+    change over its own period T: LinuxCNC (tp.c, tpSetupTangent) counts it as an acceleration
+    4r / (D T) against the axis's limit, takes a junction whose share is above its kink ratio
+    (0.1) as a corner to slow down for, and below it lowers the move's acceleration by that
+    share. Held to ROUNDING_SPIKE_SHARE (1 %) of the smaller of the profile's tangential and
+    normal acceleration, rounding costs at most 1 % of the acceleration the plan counts on and
+    leaves the kink budget to the curve's own turning. And the point, off by up to r sqrt(3),
+    stays within ROUNDING_CHORD_SHARE (a tenth) of the chord tolerance, so that rounding
+    hardly adds to the chord error. A bound met with equality is met (1e-9 margin: the limits
+    are decimal numbers, powers of ten in binary are not).
+    """
+    acc_mm_s2 = min(limits.acc_mm_s2, limits.normal_acc_mm_s2)
+    spike_r = ROUNDING_SPIKE_SHARE * acc_mm_s2 * limits.period_s * controller_period_s / 4.0
+    chord_r = ROUNDING_CHORD_SHARE * limits.chord_mm / math.sqrt(3.0)
+    largest_r = min(spike_r, chord_r) * (1.0 + 1e-9)
+    low, high = RANGES["decimals"]
+    decimals = int(low)
+    while decimals < high and 0.5 * 10.0**-decimals > largest_r:
+        decimals += 1
+    return decimals
 
 
 def builtin_profiles() -> list[str]:

@@ -20,7 +20,8 @@ from tests.conftest import convert_each
 
 DEGENERATE = Path(__file__).parent / "data" / "degenerate"
 CORNER = DEGENERATE / "corner-tripled-point.json"
-R_MM = 0.5e-4 * math.sqrt(3.0)  # output rounding at 4 decimals
+DECIMALS = 4  # the offsets below are in units of the 4th decimal
+R_MM = 0.5 * 10.0**-DECIMALS * math.sqrt(3.0)  # output rounding at DECIMALS
 
 
 def corner_curve() -> NurbsCurve:
@@ -64,7 +65,7 @@ def test_projection_through_a_corner_measures_an_offset_after_it(offset_r: float
 def test_a_point_moved_off_the_curve_right_after_a_corner_fails(tmp_path: Path) -> None:
     """The first point after the corner, Y0.0001 on the line X20, moved to X20.0003 (3.5 r off
     the curve, which never passes x = 20): path-deviation at that line and no other."""
-    machine = load_machine("default")
+    machine = load_machine("default", {"decimals": DECIMALS})
     good = tmp_path / "corner.nc"
     convert_file(CORNER, good, machine)
     assert check_files(CORNER, good, machine).ok

@@ -41,14 +41,20 @@ BAD = {
                          "the curve needs at least 0.323607 s"),
 }
 GOOD = {"quarter-circle.nc": "quarter-circle.json", "line.nc": "line.json"}
+FIXTURE_DECIMALS = 4
 
 
 def violated(report) -> set[str]:
     return {v.check for v in report.violations}
 
 
+def fixture_machine(**limits: float):
+    """The profile the fixtures were written with: the default, which then wrote 4 decimals."""
+    return load_machine("default", {"decimals": FIXTURE_DECIMALS, **limits})
+
+
 def check(output: str, source: str, **limits: float):
-    return check_files(DATA / source, DATA / output, load_machine("default", limits or None))
+    return check_files(DATA / source, DATA / output, fixture_machine(**limits))
 
 
 @pytest.mark.parametrize("output", list(BAD))
@@ -140,5 +146,5 @@ def test_coverage_both_sides(tmp_path: Path) -> None:
     lines[k] = f"{lines[k].split('F')[0]}F{feed * 31 / 32:.3f}\n"
     slower = tmp_path / name
     slower.write_text("".join(lines))
-    report = check_files(DATA / "quarter-circle.json", slower, load_machine("default"))
+    report = check_files(DATA / "quarter-circle.json", slower, fixture_machine())
     assert "coverage" not in violated(report) and "chord-error" in violated(report)

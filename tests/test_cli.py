@@ -18,11 +18,14 @@ from click.testing import CliRunner
 
 from nurbsfeed.cli import main
 from nurbsfeed.jit import JIT_ENABLED
+from nurbsfeed.machine import load_machine
 from nurbsfeed.readers.json_curves import read_json_curves
 from tests.conftest import ROOT, SAMPLES
 from tests.gcode_parse import moves
 
 GOLDEN = ROOT / "tests" / "golden"
+# the default profile's coordinate decimals (chosen from its limits: tests/test_profile.py)
+DECIMALS = load_machine("default").decimals
 
 
 def run(*args: str) -> tuple[int, str, str]:
@@ -184,7 +187,8 @@ BAD_PROFILES = [
     ("period_s: [1\n", "{p}:2:1: not valid YAML (expected ',' or ']', but got '<stream end>')"),
     ("{base}\nspeed: 3\n", "{p}:10:1: unknown key 'speed' (known keys: chord_error_mm, decimals, "
      "feed_decimals, max_acc_mm_s2, max_curve_time_s, max_feed_mm_s, max_jerk_mm_s3, "
-     "max_normal_acc_mm_s2, max_normal_jerk_mm_s3, period_s)"),
+     "max_normal_acc_mm_s2, max_normal_jerk_mm_s3, min_block_time_s, move_periods, "
+     "period_s)"),
     ("{base}\nchord_error_mm: .nan\n", "{p}:10:1: 'chord_error_mm' must be positive and finite, "
      "not nan"),
     ("{base}\nmax_acc_mm_s2: fast\n", "{p}:10:1: 'max_acc_mm_s2' must be a number, not 'fast'"),
@@ -219,7 +223,7 @@ def test_bad_machine_profile_names_file_key_and_value(tmp_path: Path, content: s
 
 @pytest.mark.parametrize(("args", "message"), [
     (["--machine", "nosuch"], "unknown machine 'nosuch': give a YAML file or one of default, "
-                              "paper-table1"),
+                              "linuxcnc, paper-table1"),
     (["--period-s", "0"], "option --period-s: 'period_s' must be positive and finite, not 0.0"),
     (["--decimals", "12"], "option --decimals: 'decimals' must be a whole number from 0 to 8, "
                            "not 12"),
@@ -398,11 +402,11 @@ def test_conversions_at_the_envelope_edges_write_points_on_the_curve(tmp_path: P
     assert u_input[0] == curve.u_origin and np.all(np.diff(u_input) >= 0)
     assert u_input[-1] == pytest.approx(curve.u_origin + curve.u_scale, rel=1e-15)
     u = (u_input - curve.u_origin) / curve.u_scale
-    rounding_mm = np.sqrt(3) / 2 * 1e-4  # default profile: 4 decimals
+    rounding_mm = np.sqrt(3) / 2 * 10.0**-DECIMALS
     assert np.max(np.linalg.norm(curve.point(u) - points, axis=1)) <= 1e-9 * (
         1 + np.max(np.abs(points)))
-    written, _, _ = moves(out.read_text(), np.round(points[0], 4))
-    assert np.array_equal(written, np.round(points[1:], 4)[np.any(
-        np.diff(np.round(points, 4), axis=0) != 0, axis=1)])
+    written, _, _ = moves(out.read_text(), np.round(points[0], DECIMALS))
+    assert np.array_equal(written, np.round(points[1:], DECIMALS)[np.any(
+        np.diff(np.round(points, DECIMALS), axis=0) != 0, axis=1)])
     assert _curve_off_chords_mm(curve, u, points) <= 0.001 + rounding_mm  # chord_error_mm
     assert np.max(np.linalg.norm(np.diff(points, axis=0), axis=1)) <= 50.0 * 0.001 * (1 + 1e-6)

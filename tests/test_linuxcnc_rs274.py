@@ -1,7 +1,8 @@
 """LinuxCNC's own interpreter reads every converted sample as we meant it.
 
 rs274 (LinuxCNC's standalone interpreter) turns a program into the canonical moves a LinuxCNC
-machine would plan. For every sample converted with the default profile: no interpreter error;
+machine would plan. For every sample converted with the linuxcnc profile (the one for such a
+machine) and with the default profile: no interpreter error;
 its feed moves are the points we wrote, in order, with the F we wrote; and summed as
 distance / F they last the planned cycle of each curve, so the machine is asked for the feed
 the plan computed.
@@ -36,10 +37,21 @@ pytestmark = pytest.mark.skipif(
     reason="rs274 not installed: LinuxCNC's interpreter comes with the linuxcnc-uspace package")
 
 
+PROFILES = ("linuxcnc", "default")
+
+
 @pytest.fixture(scope="module")
-def converted(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    folder = tmp_path_factory.mktemp("linuxcnc")
-    return {source.name: convert_for_linuxcnc(source, folder) for source in samples()}
+def converted_with(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict[str, Path]]:
+    return {profile: {source.name: convert_for_linuxcnc(source,
+                                                        tmp_path_factory.mktemp(profile),
+                                                        profile=profile)
+                      for source in samples()}
+            for profile in PROFILES}
+
+
+@pytest.fixture(scope="module")
+def converted(converted_with: dict[str, dict[str, Path]]) -> dict[str, Path]:
+    return converted_with["linuxcnc"]
 
 
 def cycle_error(canon: CanonCurve, written: WrittenCurve) -> float:
@@ -57,10 +69,12 @@ def check_read_as_written(canon: CanonCurve, written: WrittenCurve) -> None:
     assert abs(canon.planned_cycle_s - canon.comment_cycle_s) <= 0.5e-3
 
 
+@pytest.mark.parametrize("profile", PROFILES)
 @pytest.mark.parametrize("name", [source.name for source in samples()])
-def test_linuxcnc_reads_the_moves_and_feeds_we_wrote(converted: dict[str, Path], name: str,
+def test_linuxcnc_reads_the_moves_and_feeds_we_wrote(converted_with: dict[str, dict[str, Path]],
+                                                     profile: str, name: str,
                                                      tmp_path: Path) -> None:
-    program = converted[name]
+    program = converted_with[profile][name]
     canon = run_rs274(program, tmp_path)
     assert canon.returncode == 0 and canon.errors() == [], canon.errors()
     written = written_curves(program.read_text())

@@ -7,13 +7,16 @@ import math
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
 from nurbsfeed.cli import main
+from nurbsfeed.errors import ProfileError
 from nurbsfeed.machine import (INT_KEYS, MAX_PROFILE_BYTES, MAX_PROFILE_NODES, RANGES,
                                load_machine)
 from tests.conftest import ROOT, SAMPLES
+from tests.gcode_parse import moves
 
 SOURCE = SAMPLES / "quarter-circle.json"
 DEFAULT = (ROOT / "configs" / "default.yaml").read_text()
@@ -48,6 +51,10 @@ def test_each_end_of_each_range_converts_or_is_refused_at_the_curve(tmp_path: Pa
         assert words and all("." in w and math.isfinite(float(w)) for w in words)
     else:  # the curve would run for hours (a slow feed), or longer than a tiny limit
         assert code == 2 and not out.exists()
+        if key == "min_block_time_s":  # a floor above the default's 1 ms moves
+            assert stderr.startswith(f"option {option(key)}: a written move of move_periods x "
+                                     "period_s = 1 ms is shorter than min_block_time_s"), stderr
+            return
         assert re.fullmatch(rf"{re.escape(str(SOURCE))}:\d+:\d+: curve 0 \S+: planned cycle "
                             r"\S+ s exceeds max_curve_time_s = \S+ s \(.*\)\n", stderr), stderr
 
@@ -56,6 +63,11 @@ def test_each_end_of_each_range_converts_or_is_refused_at_the_curve(tmp_path: Pa
 def test_each_end_of_each_range_is_accepted_in_a_file(tmp_path: Path, key: str,
                                                       value: float) -> None:
     path, _ = profile_with(tmp_path, key, repr(value))
+    if key == "min_block_time_s" and value > 0.001:  # see the floor tests below
+        path.write_text(path.read_text() + "move_periods: 1000\n")
+        assert load_machine(str(path)) == load_machine("default", {key: value,
+                                                                   "move_periods": 1000})
+        return
     assert load_machine(str(path)) == load_machine("default", {key: value})
 
 
@@ -63,6 +75,8 @@ def outside(key: str) -> list[float]:
     low, high = RANGES[key]
     if key in INT_KEYS:
         return [low - 1, high + 1]
+    if low == 0:
+        return [-1e-300, -1e-9, high * 1.001, 1e308]
     return [low * 0.999, high * 1.001, 1e-300, 1e308]
 
 
@@ -145,3 +159,147 @@ def test_an_integer_of_hundreds_or_thousands_of_digits_is_refused_at_its_place(
         assert stderr == f"{path}:{line}:1: '{key}' {what.format(range=span)}\n"
     else:  # the YAML scalar itself, after the key
         assert stderr == f"{path}:{line}:{len(key) + 3}: {what}\n"
+
+
+# ---- the keys that describe the controller: move_periods, min_block_time_s -----------------
+
+@pytest.mark.parametrize("text", ["0", "-2", "2.5", "2.0", "'2'", "true", "1001"])
+def test_move_periods_other_than_a_whole_number_from_1_is_refused_at_its_key(
+        tmp_path: Path, text: str) -> None:
+    path, line = profile_with(tmp_path, "move_periods", text)
+    code, _, stderr = run("convert", str(SOURCE), "-m", str(path))
+    shown = {"'2'": "'2'", "true": "True"}.get(text, text)
+    assert (code, stderr) == (2, f"{path}:{line}:1: 'move_periods' must be a whole number "
+                                 f"from 1 to 1000, not {shown}\n")
+
+
+@pytest.mark.parametrize("text, what", [("-0.001", "must be from 0 to 1, not -0.001"),
+                                        (".nan", "must be positive and finite, not nan"),
+                                        ("fast", "must be a number, not 'fast'")])
+def test_a_min_block_time_that_is_no_time_is_refused_at_its_key(tmp_path: Path, text: str,
+                                                                what: str) -> None:
+    path, line = profile_with(tmp_path, "min_block_time_s", text)
+    code, _, stderr = run("convert", str(SOURCE), "-m", str(path))
+    assert (code, stderr) == (2, f"{path}:{line}:1: 'min_block_time_s' {what}\n")
+
+
+def test_a_move_shorter_than_the_block_time_floor_is_refused_naming_the_key_to_raise(
+        tmp_path: Path) -> None:
+    """LinuxCNC's floor, 1.02 servo periods, under 1 ms moves: every move would be stretched."""
+    path, _ = profile_with(tmp_path, "min_block_time_s", "0.00102")
+    path.write_text(path.read_text() + "move_periods: 1\n")
+    out = tmp_path / "q.nc"
+    code, stdout, stderr = run("convert", str(SOURCE), "-m", str(path), "-o", str(out))
+    assert (code, stdout) == (2, "") and not out.exists()
+    last_line = len(path.read_text().splitlines())
+    assert stderr == (f"{path}:{last_line}:1: a written move of move_periods x period_s = 1 ms "
+                      "is shorter than min_block_time_s = 1.02 ms: the controller would stretch "
+                      "every move and not run the planned cycle; raise move_periods to 2\n")
+    code, _, stderr = run("convert", str(SOURCE), "-m", str(path), "--move-periods", "2",
+                          "-o", str(out))
+    assert code == 0 and out.exists(), stderr
+
+
+def test_the_floor_message_points_at_the_option_that_set_it(tmp_path: Path) -> None:
+    code, _, stderr = run("convert", str(SOURCE), "--min-block-time-s", "0.0025")
+    assert (code, stderr) == (2, "option --min-block-time-s: a written move of move_periods x "
+                                 "period_s = 1 ms is shorter than min_block_time_s = 2.5 ms: the "
+                                 "controller would stretch every move and not run the planned "
+                                 "cycle; raise move_periods to 3\n")
+
+
+@pytest.mark.parametrize("move_periods, floor_s, accepted", [
+    (2, 0.002, True),  # equal: the floor is met
+    (2, 0.0020001, False),
+    (3, 0.003, True),  # 3 x 0.001 is 0.0030000000000000005 in binary
+    (1, 0.0, True),
+])
+def test_both_sides_of_the_block_time_floor(move_periods: int, floor_s: float,
+                                            accepted: bool) -> None:
+    overrides = {"move_periods": move_periods, "min_block_time_s": floor_s}
+    if accepted:
+        assert load_machine("default", overrides).min_block_time_s == floor_s
+    else:
+        with pytest.raises(ProfileError, match="shorter than min_block_time_s"):
+            load_machine("default", overrides)
+
+
+def test_a_move_longer_than_a_second_is_refused(tmp_path: Path) -> None:
+    path, _ = profile_with(tmp_path, "period_s", "0.5")
+    path.write_text(path.read_text() + "move_periods: 3\n")
+    code, _, stderr = run("convert", str(SOURCE), "-m", str(path))
+    assert (code, stderr) == (2, f"{path}:{len(path.read_text().splitlines())}:1: a written "
+                                 "move of move_periods x period_s = 1.5 s: at most 1 s\n")
+
+
+def test_the_planner_and_writer_work_with_moves_of_move_periods(tmp_path: Path) -> None:
+    """Two-period moves: the plan steps by 2 ms and every written move lasts 2 ms (Σ L / F is
+    the planned cycle); the controller period stays the profile's period_s."""
+    machine = load_machine("default", {"move_periods": 2})
+    assert (machine.limits.period_s, machine.controller_period_s) == (0.002, 0.001)
+    out = tmp_path / "q.nc"
+    assert run("convert", str(SOURCE), "--move-periods", "2", "-o", str(out), "-q")[0] == 0
+    text = out.read_text()
+    comment = re.search(r"(\d+) points, period 2 ms, .* planned cycle ([\d.]+) s", text)
+    assert comment is not None, text[:300]
+    written, feeds, _ = moves(text, [10.0, 0.0, 0.0])
+    steps = np.linalg.norm(np.diff(np.vstack([[10.0, 0.0, 0.0], written]), axis=0), axis=1)
+    periods = steps / (feeds / 60.0) / 0.002
+    assert np.allclose(periods, np.round(periods), rtol=5e-3) and np.all(np.round(periods) >= 1)
+    assert int(np.round(periods).sum()) == int(comment[1]) - 1
+    assert math.isclose(float(np.sum(steps / (feeds / 60.0))), float(comment[2]), abs_tol=5e-4)
+
+
+# ---- decimals chosen from the move duration and the limits ---------------------------------
+
+def spike_mm_s2(decimals: int, machine) -> float:
+    """The largest acceleration a controller reads from rounding at a junction: 4 r / (D T)."""
+    return 4 * 0.5 * 10.0**-decimals / (machine.limits.period_s * machine.controller_period_s)
+
+
+@pytest.mark.parametrize("name, decimals", [("default", 5), ("linuxcnc", 6),
+                                            ("paper-table1", 4)])
+def test_the_built_in_profiles_write_the_decimals_their_limits_ask_for(name: str,
+                                                                      decimals: int) -> None:
+    """default and linuxcnc give no decimals: the fewest whose rounding spike is at most 1 % of
+    the smaller acceleration limit; paper-table1 keeps the paper's 4."""
+    machine = load_machine(name)
+    assert machine.decimals == decimals
+    if name != "paper-table1":
+        acc = min(machine.limits.acc_mm_s2, machine.limits.normal_acc_mm_s2)
+        assert spike_mm_s2(decimals, machine) <= 0.01 * acc * (1 + 1e-9)
+        assert spike_mm_s2(decimals - 1, machine) > 0.01 * acc
+        assert 0.5 * 10.0**-decimals * math.sqrt(3) <= machine.limits.chord_mm / 10
+
+
+@pytest.mark.parametrize("acc, decimals", [(2000.0, 5), (1999.0, 6), (20000.0, 4),
+                                           (19999.0, 5), (1e-3, 8)])
+def test_both_sides_of_the_rounding_spike_bound(acc: float, decimals: int) -> None:
+    """At 1 ms moves 10^-d / 1e-6 s² <= 0.01 A: A = 2000 just meets 5 decimals, 1999 does not;
+    a tiny limit asks for more than 8 and gets the profile's maximum."""
+    overrides = {"max_acc_mm_s2": acc, "max_normal_acc_mm_s2": 1e7, "chord_error_mm": 10.0}
+    assert load_machine("default", overrides).decimals == decimals
+
+
+@pytest.mark.parametrize("chord_mm, decimals", [(8.7e-4, 4), (8.6e-4, 5)])
+def test_both_sides_of_the_rounding_chord_bound(chord_mm: float, decimals: int) -> None:
+    """r sqrt 3 <= delta / 10 with r = 0.5e-4: delta >= 8.66e-4 mm for 4 decimals."""
+    overrides = {"max_acc_mm_s2": 1e7, "max_normal_acc_mm_s2": 1e7, "chord_error_mm": chord_mm}
+    assert load_machine("default", overrides).decimals == decimals
+
+
+def test_the_profiles_decimals_and_the_option_override_the_choice(tmp_path: Path) -> None:
+    path, _ = profile_with(tmp_path, "decimals", "3")
+    assert load_machine(str(path)).decimals == 3
+    assert load_machine("linuxcnc", {"decimals": 4}).decimals == 4
+    out = tmp_path / "q.nc"
+    assert run("convert", str(SOURCE), "-m", "linuxcnc", "-o", str(out), "-q")[0] == 0
+    digits = {len(w.partition(".")[2]) for w in re.findall(r"[XYZ](-?[\d.]+)", out.read_text())}
+    assert max(digits) == 6
+
+
+def test_the_linuxcnc_profile_keeps_every_axis_within_the_machines_acceleration() -> None:
+    """1000 mm/s² per axis: an axis's acceleration is at most the path's, sqrt(A_t² + A_n²)."""
+    limits = load_machine("linuxcnc").limits
+    assert math.hypot(limits.acc_mm_s2, limits.normal_acc_mm_s2) <= 1000.0
+    assert limits.feed_mm_s <= 200.0

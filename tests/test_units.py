@@ -14,10 +14,12 @@ import numpy as np
 from click.testing import CliRunner
 
 from nurbsfeed.cli import main
+from nurbsfeed.machine import load_machine
 from nurbsfeed.program import MM_PER_INCH
 from tests.gcode_parse import moves
 
 PERIOD_S = 0.001  # the default profile's
+DECIMALS = load_machine("default").decimals  # in mm programs; one more in inch programs
 CURVE_IN = {"name": "s-curve", "degree": 3, "knots": [0, 0, 0, 0, 0.5, 1, 1, 1, 1],
             "control_points": [[0, 0, -0.02], [0.4, 0.8, -0.02], [1.2, 0.8, -0.03],
                                [1.6, 0.0, -0.02], [2.0, 0.4, -0.01]],
@@ -53,7 +55,8 @@ def test_an_inch_program_moves_as_the_same_curve_in_mm(tmp_path: Path) -> None:
     assert inch_trace.shape == mm_trace.shape
     assert np.allclose(inch_trace, mm_trace, rtol=0, atol=1e-9)
     start = np.array(CURVE_IN["control_points"][0], dtype=float)
-    for text, unit_mm, decimals in ((inch_text, MM_PER_INCH, 5), (mm_text, 1.0, 4)):
+    for text, unit_mm, decimals in ((inch_text, MM_PER_INCH, DECIMALS + 1),
+                                    (mm_text, 1.0, DECIMALS)):
         points, k = written_at_periods(text, start * MM_PER_INCH / unit_mm)
         assert k[-1] == len(mm_trace) - 1  # every period, the last move onto the curve end
         assert all(len(w) - w.index(".") - 1 <= decimals
@@ -79,9 +82,9 @@ def test_check_reads_an_inch_program_in_mm(tmp_path: Path) -> None:
     limits = {units: {c["name"]: c["limit"] for c in report["checks"]}
               for units, report in reports.items()}
     assert limits["in"]["feed"] == limits["mm"]["feed"] == CURVE_IN["feed"] * MM_PER_INCH / 60
-    # the inch program's rounding, 0.5e-5 in per axis, in mm
+    # the inch program's rounding, half its last written digit per axis, in mm
     rounding_mm = reports["in"]["estimation"][0]["rounding_mm"]
-    assert math.isclose(rounding_mm, 0.5e-5 * math.sqrt(3) * MM_PER_INCH)
+    assert math.isclose(rounding_mm, 0.5 * 10.0**-(DECIMALS + 1) * math.sqrt(3) * MM_PER_INCH)
 
 
 def test_plan_reports_an_inch_program_in_mm(tmp_path: Path) -> None:

@@ -1,9 +1,10 @@
 """How a LinuxCNC machine runs nurbsfeed's output (issue 14), printed as a table:
 
     python -m tests.bench.linuxcnc                         # every sample, 1000 and 5000 mm/s²
-    python -m tests.bench.linuxcnc butterfly.json --acc 1000 --output decimals=6,period_s=0.002
+    python -m tests.bench.linuxcnc butterfly.json --acc 1000 --output default,decimals=6
 
-Each sample is converted with the default profile (and an output variant's overrides), run end
+Each sample is converted with an output variant: a built-in profile (the linuxcnc profile when
+the variant names none) and overrides of its keys. It is run end
 to end on the headless simulated mill of tests/linuxcnc/sim/ (1 ms servo period, 200 mm/s
 per axis, the acceleration per axis under test) and its commanded positions recorded every
 servo period (tests/linuxcnc/run_sim.py). Per curve: measured / planned cycle (the machine's
@@ -23,7 +24,8 @@ import tempfile
 from pathlib import Path
 
 from tests.linuxcnc.measure import MeasurementError, measure
-from tests.linuxcnc.programs import convert_for_linuxcnc, samples
+from nurbsfeed.machine import INT_KEYS
+from tests.linuxcnc.programs import LINUXCNC_PROFILE, convert_for_linuxcnc, samples
 from tests.linuxcnc.run_sim import (
     ACCELERATIONS_MM_S2,
     SimulationError,
@@ -31,18 +33,21 @@ from tests.linuxcnc.run_sim import (
     unavailable_reason,
 )
 
-DEFAULT_OUTPUTS = ("default", "decimals=6")
+DEFAULT_OUTPUTS = (LINUXCNC_PROFILE, "default")
 
 
-def output_overrides(spec: str) -> dict[str, float | int]:
-    """'decimals=6,period_s=0.002' -> {'decimals': 6, 'period_s': 0.002}; 'default' -> {}."""
+def output_variant(spec: str) -> tuple[str, dict[str, float | int]]:
+    """'default,decimals=6,period_s=0.002' -> ('default', {'decimals': 6, 'period_s': 0.002}):
+    an item without '=' names the profile (linuxcnc when none does), the others override it."""
+    profile = LINUXCNC_PROFILE
     overrides: dict[str, float | int] = {}
     for item in filter(None, spec.split(",")):
-        if item == "default":
+        key, equals, value = item.partition("=")
+        if not equals:
+            profile = key
             continue
-        key, _, value = item.partition("=")
-        overrides[key] = int(value) if key in ("decimals", "feed_decimals") else float(value)
-    return overrides
+        overrides[key] = int(value) if key in INT_KEYS else float(value)
+    return profile, overrides
 
 
 def main() -> None:
@@ -51,8 +56,8 @@ def main() -> None:
     parser.add_argument("--acc", type=float, action="append",
                         help="machine acceleration per axis, mm/s² (default: 1000 and 5000)")
     parser.add_argument("--output", action="append",
-                        help="profile overrides of an output variant, e.g. decimals=6 "
-                             "(default: the default profile, and decimals=6)")
+                        help="an output variant: a built-in profile and overrides of its "
+                             "keys, e.g. default,decimals=6 (default: linuxcnc, and default)")
     args = parser.parse_args()
     if reason := unavailable_reason():
         sys.exit(f"cannot run LinuxCNC: {reason}")
@@ -65,7 +70,8 @@ def main() -> None:
             folder = Path(scratch) / output.replace(",", "_")
             folder.mkdir()
             for source in chosen:
-                program = convert_for_linuxcnc(source, folder, output_overrides(output))
+                profile, overrides = output_variant(output)
+                program = convert_for_linuxcnc(source, folder, overrides, profile)
                 for acc_mm_s2 in args.acc or ACCELERATIONS_MM_S2:
                     try:
                         runs = measure(source, program, simulate(program, acc_mm_s2))

@@ -35,10 +35,14 @@ def fanuc_only_lines(program_text: str) -> list[str]:
     return [line for line in program_text.splitlines() if FANUC_ONLY_LINE.match(line)]
 
 
-def convert_for_linuxcnc(source: Path, folder: Path, overrides: dict | None = None) -> Path:
-    """`source` converted with the default profile (and overrides), Fanuc-only lines left out."""
+LINUXCNC_PROFILE = "linuxcnc"  # the built-in profile of a machine like the simulated one
+
+
+def convert_for_linuxcnc(source: Path, folder: Path, overrides: dict | None = None,
+                         profile: str = LINUXCNC_PROFILE) -> Path:
+    """`source` converted with `profile` (and overrides), Fanuc-only lines left out."""
     converted = folder / f"{source.stem}.converted.nc"
-    convert_file(source, converted, load_machine("default", overrides or {}))
+    convert_file(source, converted, load_machine(profile, overrides or {}))
     text = converted.read_text()
     dropped = set(fanuc_only_lines(text))
     target = folder / f"{source.stem}.ngc"
