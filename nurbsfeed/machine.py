@@ -10,10 +10,11 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import yaml
 
@@ -222,7 +223,7 @@ class _ProfileLoader(yaml.SafeLoader):
 
     nodes = 0
 
-    def compose_node(self, parent: yaml.Node | None, index: Any) -> yaml.Node:
+    def compose_node(self, parent: yaml.Node | None, index: Any) -> yaml.Node | None:
         event = self.peek_event()
         if isinstance(event, yaml.AliasEvent) or getattr(event, "anchor", None) is not None:
             raise _NotAProfile(problem="anchors and aliases (&name, *name) have no place in a "
@@ -232,7 +233,7 @@ class _ProfileLoader(yaml.SafeLoader):
             raise _NotAProfile(problem=f"more than {MAX_PROFILE_NODES} YAML values: a machine "
                                "profile is a flat mapping of a few numbers",
                                problem_mark=event.start_mark)
-        return super().compose_node(parent, index)  # type: ignore[no-any-return]
+        return super().compose_node(parent, index)
 
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
         seen: set[Any] = set()
@@ -248,7 +249,7 @@ class _ProfileLoader(yaml.SafeLoader):
 
     def construct_yaml_int(self, node: yaml.ScalarNode) -> int:
         try:
-            return super().construct_yaml_int(node)  # type: ignore[no-any-return]
+            return super().construct_yaml_int(node)
         except ValueError:  # more digits than Python converts (sys.get_int_max_str_digits)
             raise _NotAProfile(problem="an integer too long to be a number",
                                problem_mark=node.start_mark) from None
@@ -261,7 +262,7 @@ _ProfileLoader.add_implicit_resolver(
     list("-+0123456789."))
 
 
-def _key_places(node: yaml.Node, where: str) -> dict[str, Location]:
+def _key_places(node: yaml.Node | None, where: str) -> dict[str, Location]:
     """Line and column of each top-level key, from the YAML node tree."""
     if not isinstance(node, yaml.MappingNode):
         return {}
@@ -307,7 +308,7 @@ def load_machine(name_or_path: str, overrides: Mapping[str, Any] | None = None) 
         mark = getattr(exc, "problem_mark", None)
         loc = Location(where, mark.line + 1, mark.column + 1) if mark else Location(where)
         problem = getattr(exc, "problem", exc)
-        raise ProfileError(problem if isinstance(exc, _NotAProfile)
+        raise ProfileError(str(problem) if isinstance(exc, _NotAProfile)
                            else f"not valid YAML ({problem})", loc) from None
     finally:
         loader.dispose()

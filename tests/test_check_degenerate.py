@@ -78,5 +78,6 @@ def test_a_point_moved_off_the_curve_right_after_a_corner_fails(tmp_path: Path) 
     bad.write_text("".join(lines))
     report = check_files(CORNER, bad, machine)
     deviations = [v for v in report.violations if v.check == "path-deviation"]
-    assert [v.where for v in deviations] == [f"{bad}:{k + 1}"], "\n".join(map(str, report.violations))
+    assert [v.where for v in deviations] == [f"{bad}:{k + 1}"], "\n".join(
+        map(str, report.violations))
     assert "0.0003 mm from the curve" in deviations[0].message

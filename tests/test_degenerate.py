@@ -17,10 +17,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
-
-from click.testing import CliRunner
 
 from nurbsfeed.cli import main
 from nurbsfeed.gcode.writer import MoveWriter

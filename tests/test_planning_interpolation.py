@@ -12,8 +12,8 @@ from nurbsfeed.interpolate import BUMP_MAX_SLOWDOWN, BUMP_PERIODS, METHODS, inte
 from nurbsfeed.planning.limits import Limits, curvature_threshold
 from nurbsfeed.planning.planner import KIND_PEAK, plan_curve
 from tests import naive_nurbs
-from tests.limits_check import assert_within, measure
 from tests.conftest import law_increments, law_speed_at_arc
+from tests.limits_check import assert_within, measure
 from tests.test_geometry import random_curve
 
 

@@ -13,8 +13,7 @@ from click.testing import CliRunner
 
 from nurbsfeed.cli import main
 from nurbsfeed.errors import ProfileError
-from nurbsfeed.machine import (INT_KEYS, MAX_PROFILE_BYTES, MAX_PROFILE_NODES, RANGES,
-                               load_machine)
+from nurbsfeed.machine import INT_KEYS, MAX_PROFILE_BYTES, MAX_PROFILE_NODES, RANGES, load_machine
 from tests.conftest import ROOT, SAMPLES
 from tests.gcode_parse import moves
 
@@ -151,7 +150,8 @@ def test_an_integer_of_hundreds_or_thousands_of_digits_is_refused_at_its_place(
         tmp_path: Path, key: str, digits: int, what: str) -> None:
     path, line = profile_with(tmp_path, key, "9" * digits)
     low, high = RANGES[key]
-    span = f"a whole number from {low} to {high}" if key in INT_KEYS else f"from {low:g} to {high:g}"
+    span = (f"a whole number from {low} to {high}" if key in INT_KEYS
+            else f"from {low:g} to {high:g}")
     out = tmp_path / "q.nc"
     code, stdout, stderr = run("convert", str(SOURCE), "-m", str(path), "-o", str(out))
     assert (code, stdout) == (2, "") and not out.exists()

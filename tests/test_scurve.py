@@ -7,9 +7,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from nurbsfeed.planning.scurve import (peak_speed, reachable_speed, scan_speeds,
-                                       transition_distance_mm, transition_phases,
-                                       transition_time_s)
+from nurbsfeed.planning.scurve import (
+    peak_speed,
+    reachable_speed,
+    scan_speeds,
+    transition_distance_mm,
+    transition_phases,
+    transition_time_s,
+)
 from tests.conftest import law_at, law_from_segments, law_increments, law_speed_at_arc
 
 speeds = st.floats(0.0, 500.0)

@@ -1,4 +1,5 @@
-"""G1 output rules (design §5): decimal points, no -0., no zero moves, F from written coordinates."""
+"""G1 output rules (design §5): decimal points, no -0., no zero moves, F from the written
+coordinates."""
 
 from __future__ import annotations
 

@@ -23,7 +23,6 @@ from nurbsfeed.machine import Machine
 from nurbsfeed.pipeline import plan_block
 from nurbsfeed.planning.planner import Plan
 
-
 # Wei et al. 2022, Table 2 (butterfly, Table 1 limits, MATLAB): max feed fluctuation in %, and
 # computation time per interpolation step in microseconds.
 PAPER_TABLE2 = {"taylor1": (6.84, 3.9), "rk4": (0.36, 16.1), "rk2c": (0.0281, 11.5)}

@@ -10,7 +10,6 @@ import numpy as np
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.geometry.nurbs import curvature_from_derivatives
 
-
 CHORD_SAMPLES = 9
 CHORD_REFINE_ITERATIONS = 40
 GOLDEN = 0.5 * (math.sqrt(5.0) - 1.0)

@@ -353,7 +353,7 @@ class MoveWriter:
             used = _emit_moves(points[lo:lo + CHUNK_POINTS], self.per_mm, self.decimals,
                                self.scale, self.unit, self.period_s, self.feed_decimals,
                                _FEED_POW10, self.eol, _AXES, self.state, self.buf)
-            self.out.write(self.buf[:used])
+            self.out.write(self.buf[:used].data)  # the bytes in place, no copy
 
 
 def format_number(value: float, decimals: int) -> str:

@@ -28,7 +28,6 @@ import numpy as np
 from nurbsfeed.errors import CurveError
 from nurbsfeed.geometry.kernel import curvature_many, eval_many, span_polynomials
 
-
 # ---- the input envelope ------------------------------------------------------------------------
 # Degree: the Taylor-Horner evaluation stays within 2.3e-14 of the exact curve up to degree 9,
 # 1e-12 up to 19, and breaks down from degree 21 on; controllers accept 1-3 (Fanuc P2-P4,
@@ -76,7 +75,7 @@ class NurbsCurve:
 
     @classmethod
     def build(cls, degree: object, knots: object, points: object, weights: object = None,
-              name: str = "") -> "NurbsCurve":
+              name: str = "") -> NurbsCurve:
         """Check a user's curve field by field; raise CurveError naming the field and value.
 
         The knots are stored mapped onto [0, 1] and the weights scaled by a power of two (see the

@@ -263,7 +263,7 @@ def _brent_max(knots, coef, degree, span, a, b, x, kappa_x, tol):
                 b = u
             if fu <= fw or w == x:
                 v, fv, w, fw = w, fw, u, fu
-            elif fu <= fv or v == x or v == w:
+            elif fu <= fv or v == x or v == w:  # noqa: SIM109 (numba's subset)
                 v, fv = u, fu
     return x, -fx
 

@@ -390,7 +390,8 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
         if new.size == 0 or shoulders.size >= SHOULDER_ROUNDS * max(1, key_node.size):
             break
         shoulders = np.union1d(shoulders, new)
-    law = TimeLaw.from_pieces(*pieces, key_t, duration)
+    t0, s0, v0, a0, jk = pieces
+    law = TimeLaw.from_pieces(t0, s0, v0, a0, jk, key_t, duration)
     if not law.duration_s <= max_curve_time_s:
         raise CurveError(_too_long(law.duration_s, max_curve_time_s))
     slowdown, piece_key, piece_periods, piece_scale = _whole_periods(

@@ -217,7 +217,7 @@ class TimeLaw:
     @classmethod
     def from_pieces(cls, t0_s: np.ndarray, s0_mm: np.ndarray, v0_mm_s: np.ndarray,
                     a0_mm_s2: np.ndarray, jerk_mm_s3: np.ndarray, key_t_s: np.ndarray,
-                    duration_s: float) -> "TimeLaw":
+                    duration_s: float) -> TimeLaw:
         """The law of the pieces `chain_segments` made (the planner's compiled loop)."""
         arrays = (t0_s, s0_mm, v0_mm_s, a0_mm_s2, jerk_mm_s3, key_t_s)
         for arr in arrays:

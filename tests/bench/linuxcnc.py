@@ -23,8 +23,8 @@ import sys
 import tempfile
 from pathlib import Path
 
-from tests.linuxcnc.measure import MeasurementError, measure
 from nurbsfeed.machine import INT_KEYS
+from tests.linuxcnc.measure import MeasurementError, measure
 from tests.linuxcnc.programs import LINUXCNC_PROFILE, convert_for_linuxcnc, samples
 from tests.linuxcnc.run_sim import (
     ACCELERATIONS_MM_S2,

@@ -40,7 +40,8 @@ _NUMBER = re.compile(rb"[XYZF](-?[0-9]*\.?[0-9]*)")
 _COMMENT = re.compile(rb"\([^)]*\)|;.*")
 # A line a NURBS block consumes (and nurbsfeed therefore drops): a NURBS G code, or a word only
 # NURBS blocks carry, or a lone F (LinuxCNC allows one on a line of a G5.2 block).
-_BLOCK_LINE = re.compile(rb"[Gg][ \t]*0*[56][ \t]*\.[ \t]*[23]|[KkPpLlRrQq]|^[ \t]*(?:[Nn][ \t]*[0-9]+[ \t]*)?[Ff]")
+_BLOCK_LINE = re.compile(rb"[Gg][ \t]*0*[56][ \t]*\.[ \t]*[23]|[KkPpLlRrQq]"
+                         rb"|^[ \t]*(?:[Nn][ \t]*[0-9]+[ \t]*)?[Ff]")
 _LOCATED = r"^{}(?::\d+:\d+)?: \S"
 
 

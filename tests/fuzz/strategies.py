@@ -83,7 +83,7 @@ def fanuc_curve(draw: st.DrawFn, start: tuple[float, float, float], linuxcnc: bo
         words = [f"K{knots[j]}" if draw(st.booleans()) else f"K{knots[j]}."]
         if j == 0:
             axes = [f"X{point[0]:g}.", f"Y{point[1]:g}.", f"Z{point[2]:g}."]
-            words = ([f"G06.2" if not linuxcnc else "G6.2", f"P{order}"]
+            words = (["G06.2" if not linuxcnc else "G6.2", f"P{order}"]
                      + (["Q1"] if linuxcnc else []) + words + axes)
         else:
             axes = [f"X{num(0, 5)}", f"Y{num(0, 5)}"]

@@ -28,8 +28,8 @@ from nurbsfeed.analysis.check.report import (
     render_check,
 )
 from nurbsfeed.analysis.check.structure import compare_structure
-from nurbsfeed.machine import Machine
 from nurbsfeed.files import read_text
+from nurbsfeed.machine import Machine
 
 __all__ = ["CHECKS", "CheckReport", "Violation", "check_files", "project_points", "render_check"]
 

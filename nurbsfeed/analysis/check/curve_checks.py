@@ -18,8 +18,8 @@ from nurbsfeed.analysis.check.output_program import Section, decode_moves
 from nurbsfeed.analysis.check.projection import project_points
 from nurbsfeed.analysis.check.report import Estimation, Findings
 from nurbsfeed.analysis.geometry import arc_length_mm, chord_errors_mm, curvature_1_mm
-from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.gcode.writer import round_ticks, written_decimals
+from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.machine import Machine
 from nurbsfeed.planning.limits import Limits
 from nurbsfeed.program import MM_PER_UNIT, CurveBlock
@@ -171,8 +171,8 @@ def check_section(section: Section, block: CurveBlock, machine: Machine,
         if np.isnan(feed_mm_min[k]):
             feed_mm_min[k] = feed_mm_min[k - 1]
     step_mm = np.linalg.norm(np.diff(pos, axis=0), axis=1)
-    for k in np.flatnonzero(step_mm == 0.0):
-        findings.add("zero-length", int(lines[k]), "move does not move (same point as the "
+    for still in np.flatnonzero(step_mm == 0.0):
+        findings.add("zero-length", int(lines[still]), "move does not move (same point as the "
                      "one before, as written)")
 
     t_s = _check_timing(section, block, lim, r, step_mm, feed_mm_min, lines, findings)

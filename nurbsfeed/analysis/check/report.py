@@ -14,7 +14,8 @@ SHOWN_PER_CHECK = 5
 # name: (title, unit of the values, message)
 CHECKS: dict[str, tuple[str, str, str]] = {
     "path-deviation": ("path deviation", "mm",
-                       "point is {value:.4g} mm from the curve; rounding allows {allowance:.4g} mm"),
+                       "point is {value:.4g} mm from the curve; rounding allows "
+                       "{allowance:.4g} mm"),
     "chord-error": ("chord error", "mm", "chord error {value:.4g} mm > {limit:.4g} mm "
                     "+ {allowance:.4g} mm rounding"),
     "coverage": ("curve covered per move", "mm",
