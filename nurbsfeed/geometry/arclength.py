@@ -18,6 +18,9 @@ from nurbsfeed.geometry.kernel import find_span, point_d1
 from nurbsfeed.jit import jit
 
 MAX_DEPTH = 40
+# Splits per node interval: MAX_DEPTH alone allows 2^40 of them where |C'| is rounding noise
+# (coincident control points), which never ends in practice; a smooth |C'| needs a few dozen.
+MAX_SPLITS = 1 << 16
 
 
 @jit
@@ -26,7 +29,8 @@ def simpson_lengths(knots, coef, degree, nodes, speed_at_nodes, tol_per_u):
 
     coef: the curve's span polynomials; speed_at_nodes: |C'| at the nodes, already known to the
     caller (the grid computes it with the curvature). The interval [u_i, u_i+1] is integrated
-    to tol_per_u * (u_i+1 - u_i) (length units per unit of u).
+    to tol_per_u * (u_i+1 - u_i) (length units per unit of u). An interval that needs more
+    than MAX_SPLITS splits makes s NaN from its end on: the caller refuses the curve there.
     """
     n_ctrl = coef.shape[0]
     cumulative = np.zeros(nodes.size)
@@ -48,7 +52,8 @@ def simpson_lengths(knots, coef, degree, nodes, speed_at_nodes, tol_per_u):
         depth = 0.0
         top = 0
         total = 0.0
-        while True:
+        splits = 0
+        while splits <= MAX_SPLITS:
             m = 0.5 * (a + b)
             # |C'| at both quarter points (written once: helpers that take arrays cost a call)
             flm = 0.0
@@ -90,5 +95,9 @@ def simpson_lengths(knots, coef, degree, nodes, speed_at_nodes, tol_per_u):
             whole = left
             tol /= 2.0
             depth += 1.0
+            splits += 1
+        if splits > MAX_SPLITS:
+            cumulative[i + 1:] = math.nan
+            return cumulative
         cumulative[i + 1] = cumulative[i] + total
     return cumulative

@@ -39,6 +39,7 @@ import numpy as np
 
 from nurbsfeed.geometry.arclength import simpson_lengths
 from nurbsfeed.geometry.kernel import curvature, find_span, point_d1, point_d2
+from nurbsfeed.errors import CurveError
 from nurbsfeed.geometry.nurbs import NurbsCurve
 from nurbsfeed.jit import jit
 
@@ -441,7 +442,7 @@ def _chord_from(knots, coef, degree, u0, side, width, u_limit, floor_mm):
         dy = side * (qy - py)
         dz = side * (qz - pz)
         length = math.sqrt(dx * dx + dy * dy + dz * dz)
-        if length >= floor_mm:
+        if length >= floor_mm and length > 0.0:  # floor_mm is 0 if the polygon has no length
             return dx / length, dy / length, dz / length, abs(u - u0)
         if u == u_limit:
             return 0.0, 0.0, 0.0, 0.0
@@ -777,6 +778,20 @@ def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, f
     return u, kappa, speed, peak_u, stop_u, stop_cos, mean_speed
 
 
+def _zero_length_grid(curve: NurbsCurve, extra_u: np.ndarray) -> Grid:
+    """The grid of a curve whose control points all coincide: it stays at one point, whatever
+    its weights. Built here, not sampled: C' is then rounding noise over 0 (a weight != 1 leaves
+    ~1e-16 of it), which made an arc length integrated to a tolerance relative to its own mean
+    split without end, and a chord of length 0 a division by 0. The knots and the caller's
+    parameters are the nodes; no length, no curvature, no peaks, no stops (rest throughout)."""
+    u = np.union1d(curve.span_breaks, np.asarray(extra_u, dtype=float))
+    zeros = np.zeros(u.size)
+    none = np.empty(0, dtype=np.int64)
+    for a in (u, zeros, none):
+        a.setflags(write=False)
+    return Grid(u, zeros, zeros, none, none, np.empty(0))
+
+
 def build_grid(curve: NurbsCurve, spacing_mm: float, extra_u: np.ndarray = np.empty(0),
                kappa_floor: float = np.inf) -> Grid:
     """Sample, find and refine curvature maxima, integrate arc length: the planning grid.
@@ -785,6 +800,8 @@ def build_grid(curve: NurbsCurve, spacing_mm: float, extra_u: np.ndarray = np.em
     below it the limit does not depend on curvature (kappa_0), so neither jumps of kappa nor its
     maxima below it need refining.
     """
+    if curve.is_degenerate:
+        return _zero_length_grid(curve, extra_u)
     knots, coef, degree = curve.knots, curve.span_polynomials, curve.degree
     floor_mm = TANGENT_CHORD_REL * polygon_length(curve.points)
     u, kappa, speed, peak_u, stop_u, stop_cos, mean_speed = _grid_nodes(
@@ -797,6 +814,10 @@ def build_grid(curve: NurbsCurve, spacing_mm: float, extra_u: np.ndarray = np.em
         stop_cos = np.minimum.reduceat(stop_cos, first)
     peak_index = np.searchsorted(u, np.sort(peak_u))
     s = simpson_lengths(knots, coef, degree, u, speed, ARC_REL_TOL * (mean_speed + 1e-300))
+    if not math.isfinite(s[-1]):
+        q = int(np.argmin(np.isfinite(s)))
+        raise CurveError(f"arc length does not converge between u = {curve.input_u(u[q - 1]):.9g}"
+                         f" and {curve.input_u(u[q]):.9g} (|C'| there is rounding noise?)")
     # stops with no length between them (a span whose control points are all equal) are one
     # place: the first stands, the others become plain nodes with the kappa that follows them
     same = np.flatnonzero(np.diff(s[stop_index]) <= floor_mm) + 1 if stop_index.size > 1 else ()

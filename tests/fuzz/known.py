@@ -11,8 +11,6 @@ from __future__ import annotations
 import re
 
 KNOWN_FINDINGS = [
-    ("degenerate-curve-zero-division", r"internal error: ZeroDivisionError: division by zero"),
-    ("degenerate-curve-hang", r"^hang: "),
     ("corner-tangential-jerk / inch-path-deviation",
      r"^nurbsfeed check: exit 1: (.*\n)*(tangential jerk|path deviation) .* [1-9][0-9]* +\S+:"
      r"\d+\n"),
