@@ -66,9 +66,14 @@ class InputFile:
         except OSError as exc:
             raise _cannot_read(self.path, exc) from None
 
+    @property
+    def cr_only(self) -> bool:
+        """Whether the lines end in "\\r" alone (module docstring)."""
+        return b"\n" not in self.head and b"\r" in self.head
+
     def lines(self) -> Iterator[str]:
         """The lines, each with its ending, in file order (module docstring)."""
-        cr_only = b"\n" not in self.head and b"\r" in self.head
+        cr_only = self.cr_only
         text = io.TextIOWrapper(self._open(), ENCODING, ERRORS, newline="\r" if cr_only else "\n")
         with text:
             for number, line in enumerate(_reporting_read_errors(self.path, text), start=1):

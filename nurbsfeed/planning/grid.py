@@ -37,9 +37,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from nurbsfeed.errors import CurveError
 from nurbsfeed.geometry.arclength import simpson_lengths
 from nurbsfeed.geometry.kernel import curvature, find_span, point_d1, point_d2
-from nurbsfeed.errors import CurveError
 from nurbsfeed.geometry.nurbs import NurbsCurve
 from nurbsfeed.jit import jit
 

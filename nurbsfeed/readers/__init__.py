@@ -18,11 +18,13 @@ from nurbsfeed.readers.json_curves import json_program
 __all__ = ["DIALECTS", "read_program"]
 
 
-def read_program(path: Path, dialect: str = "auto") -> Iterator[ProgramItem]:
+def read_program(path: Path | InputFile, dialect: str = "auto") -> Iterator[ProgramItem]:
     """JSON curves (a .json file, or any file whose first character is "{") or a G-code program
     in `dialect`, as a stream of items. A file that cannot be opened, or an unknown dialect, is
-    refused at once; anything wrong inside the file when the stream reaches it."""
-    source = InputFile(path)
+    refused at once; anything wrong inside the file when the stream reaches it. An InputFile
+    already opened is read as it is (a pipe can be read only once)."""
+    source = path if isinstance(path, InputFile) else InputFile(path)
+    path = source.path
     if path.suffix.lower() == ".json" or source.head.lstrip().startswith(b"{"):
         return json_program(source)
     return read_gcode(source.path, source.lines(), dialect)

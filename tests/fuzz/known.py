@@ -10,11 +10,7 @@ from __future__ import annotations
 
 import re
 
-KNOWN_FINDINGS = [
-    ("corner-tangential-jerk / inch-path-deviation",
-     r"^nurbsfeed check: exit 1: (.*\n)*(tangential jerk|path deviation) .* [1-9][0-9]* +\S+:"
-     r"\d+\n"),
-]
+KNOWN_FINDINGS: list[tuple[str, str]] = []
 
 
 def known_finding(problem: str) -> str | None:

@@ -15,7 +15,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from nurbsfeed.analysis.check.curve_checks import check_section
-from nurbsfeed.analysis.check.output_program import parse_output, source_tokens, split_lines
+from nurbsfeed.analysis.check.output_program import parse_output, source_tokens
 from nurbsfeed.analysis.check.projection import project_points
 from nurbsfeed.analysis.check.report import (
     CHECKS,
@@ -28,7 +28,7 @@ from nurbsfeed.analysis.check.report import (
     render_check,
 )
 from nurbsfeed.analysis.check.structure import compare_structure
-from nurbsfeed.files import read_text
+from nurbsfeed.files import InputFile
 from nurbsfeed.machine import Machine
 
 __all__ = ["CHECKS", "CheckReport", "Violation", "check_files", "project_points", "render_check"]
@@ -37,8 +37,9 @@ __all__ = ["CHECKS", "CheckReport", "Violation", "check_files", "project_points"
 def check_files(source: Path, output: Path, machine: Machine,
                 dialect: str = "auto") -> CheckReport:
     """Check the converted program `output` against `source`."""
+    # both programs split into lines as a conversion reads them (a CR-only file too)
     src_tokens, blocks, following = source_tokens(source, machine, dialect)
-    out_lines = split_lines(read_text(output))
+    out_lines = list(InputFile(output).lines())
     findings = Findings(str(output))
     out_tokens, token_lines, sections = parse_output(out_lines, blocks, following, findings)
     compare_structure(src_tokens, out_tokens, token_lines, blocks, len(out_lines), findings)

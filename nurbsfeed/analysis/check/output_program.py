@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from nurbsfeed.analysis.check.report import Findings
+from nurbsfeed.files import InputFile
 from nurbsfeed.gcode.writer import rapid_line
 from nurbsfeed.machine import Machine
 from nurbsfeed.program import CurveBlock, PassThrough
@@ -39,10 +40,11 @@ class Section:
     moves: list[tuple[int, str]] = field(default_factory=list)  # (line number, text)
 
 
-def split_lines(text: str) -> list[str]:
-    """Lines with their endings ("\\r\\n" stays with its line)."""
-    parts = text.split("\n")
-    lines = [part + "\n" for part in parts[:-1]]
+def split_lines(text: str, ending: str) -> list[str]:
+    """Lines with their endings, each ending in `ending` ("\\n": "\\r\\n" stays with its line)
+    but perhaps the last."""
+    parts = text.split(ending)
+    lines = [part + ending for part in parts[:-1]]
     if parts[-1]:
         lines.append(parts[-1])
     return lines
@@ -59,11 +61,15 @@ def source_tokens(path: Path, machine: Machine, dialect: str
     tokens: list[Token] = []
     blocks: list[CurveBlock] = []
     following: dict[int, list[str]] = {}
-    for item in read_program(path, dialect):
+    # a pass-through item is a line of the source, or several (the inert lines inside a block):
+    # split as the reader split them (the lines the JSON reader writes hold no "\r")
+    source = InputFile(path)
+    ending = "\r" if source.cr_only else "\n"
+    for item in read_program(source, dialect):
         if isinstance(item, PassThrough) or item.rapid_to_start:
             text = item.text if isinstance(item, PassThrough) else rapid_line(
                 item.in_mm().curve.points[0], machine.decimals, item.units) + item.eol
-            for line in split_lines(text):
+            for line in split_lines(text, ending):
                 tokens.append(("line", line))
                 if blocks:
                     following[len(blocks) - 1].append(line)

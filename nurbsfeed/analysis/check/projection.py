@@ -144,6 +144,8 @@ def _project_kernel(knots, cw, degree, targets, u_first, u_last, back_mm, accept
         wz = p[2]
         speed_lo = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
         at_end = False
+        knot_after = u_last
+        corner_after = False
         while True:
             candidate = -1.0
             dc = math.inf
@@ -153,10 +155,17 @@ def _project_kernel(knots, cw, degree, targets, u_first, u_last, back_mm, accept
             else:
                 rising_lo = rising
                 # two minima within one step would leave the first unseen; a step whose chord
-                # or trapezoid arc is too long is halved
+                # or trapezoid arc is too long is halved ...
                 arc_max = max(back_mm, PROJECT_STEP_ARC_SHARE * math.sqrt(d2_lo))
+                # nor past a knot: where the curve is only C0 there (a corner) the distance
+                # has a maximum at the knot, and a step across it from the rising distance
+                # before to the rising distance after it would leave the minimum after unseen
+                before = find_span(knots, degree, n_ctrl, lo, span)
+                knot_after = knots[before + 1]
+                # the motion rests on a corner, so a foot found before one stays before it
+                corner_after = knot_after < u_last and knots[before + degree] == knot_after
                 while True:
-                    hi = min(lo + step, u_last)
+                    hi = min(lo + step, u_last, knot_after)
                     rising, d2_hi, span = _probe(knots, cw, degree, n_ctrl, hi, span, tx, ty,
                                                  tz, basis, dbasis, left, right, p, d)
                     speed_hi = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
@@ -210,6 +219,8 @@ def _project_kernel(knots, cw, degree, targets, u_first, u_last, back_mm, accept
                     u = candidate
                     dist2 = dc
             if at_end or (n_minima > 0 and lo >= window_end and (chosen or walked_mm > reach_mm)):
+                break
+            if chosen and corner_after and lo == knot_after > anchor:
                 break
         if n_minima == 0:
             dist2, span = _distance2(knots, cw, degree, n_ctrl, u, span, tx, ty, tz, basis,

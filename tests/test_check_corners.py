@@ -1,0 +1,56 @@
+"""check's projection at a corner (a C0 knot, where the motion rests): found by the fuzzing tier
+as tangential jerk 1.1x and path deviation 1.27x their allowances on outputs that keep both.
+
+A step of the projection's walk that crossed the corner, from the distance rising before it to
+the distance rising after it, left the minimum after the corner unseen: a point just after the
+corner was measured against the incoming leg (2.8e-4 mm where the curve is 6.6e-5 mm away), and
+its foot put the arc length back, a jerk spike in the divided differences. The stepped points
+themselves keep the limits (their jerk from the trace: 49,939 mm/s^3 at most).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from nurbsfeed.analysis import check_files
+from nurbsfeed.analysis.check import project_points
+from nurbsfeed.machine import load_machine
+from nurbsfeed.pipeline import convert_file
+from nurbsfeed.program import CurveBlock
+from nurbsfeed.readers import read_program
+
+CASES = Path(__file__).parent / "data" / "check-corners"
+INCH = CASES / "inch-path-deviation.ngc"
+R_MM = 0.5e-5 * 25.4 * np.sqrt(3.0)  # output rounding at 5 decimals of an inch
+CORNER_U = 5.0 / 6.0  # the double knot of the inch program's quadratic
+# written points around its corner (mm): two on the way in, the corner, two on the way out
+AROUND_THE_CORNER = np.array([[38.100254, 56.311292, 20.9804], [38.1, 56.311546, 20.9804],
+                              [38.1, 56.3118, 20.9804], [38.1, 56.311546, 20.980146],
+                              [38.1, 56.311546, 20.979892]])
+
+
+@pytest.mark.parametrize("name", ["corner-tangential-jerk.ngc", "inch-path-deviation.ngc"])
+def test_a_program_with_a_corner_converted_passes_check(tmp_path: Path, name: str) -> None:
+    machine = load_machine("default")
+    target = tmp_path / "out.nc"
+    convert_file(CASES / name, target, machine)
+    report = check_files(CASES / name, target, machine)
+    assert report.ok, "\n".join(map(str, report.violations))
+
+
+def test_points_around_a_corner_are_measured_against_their_own_leg() -> None:
+    curve = next(item.in_mm() for item in read_program(INCH)
+                 if isinstance(item, CurveBlock)).curve
+    foot, dist = project_points(curve, AROUND_THE_CORNER, 2.0 * R_MM, R_MM, 10.0 * R_MM)
+    # the distance to the curve by brute force: every 1e-11 of u on either leg near the corner
+    u = np.linspace(CORNER_U - 1e-5, CORNER_U + 1e-5, 2_000_001)
+    on_curve = curve.point(u)
+    nearest = np.array([np.linalg.norm(on_curve - p, axis=1).min()
+                        for p in AROUND_THE_CORNER])
+    assert dist == pytest.approx(nearest, rel=1e-4, abs=1e-9)
+    assert nearest[3] < 0.5 * R_MM  # once measured as 1.27 R_MM against the incoming leg
+    assert foot[0] < foot[1] < CORNER_U < foot[3] < foot[4]
+    assert foot[2] == pytest.approx(CORNER_U, abs=1e-12)
