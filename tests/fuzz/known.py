@@ -10,7 +10,11 @@ from __future__ import annotations
 
 import re
 
-KNOWN_FINDINGS: list[tuple[str, str]] = []
+KNOWN_FINDINGS = [
+    ("reversal-path-deviation / path-deviation / tangential-jerk",
+     r"^nurbsfeed check: exit 1: (.*\n)*(tangential jerk|path deviation) .* [1-9][0-9]* +\S+:"
+     r"\d+\n"),
+]
 
 
 def known_finding(problem: str) -> str | None:
