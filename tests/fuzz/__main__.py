@@ -82,6 +82,7 @@ def run_chunk(family: str, count: int, seed: int, skip: int, failures_dir: str, 
                 os._exit(EXIT_HANG)
 
     threading.Thread(target=watchdog, daemon=True).start()
+    _warm_up(folder)
 
     @hypothesis_seed(seed)
     @settings(max_examples=count, database=None, deadline=None, phases=[Phase.generate],
@@ -113,6 +114,22 @@ def run_chunk(family: str, count: int, seed: int, skip: int, failures_dir: str, 
         leftover.unlink()
     folder.rmdir()
     report.send(("done",))
+
+
+def _warm_up(folder: Path) -> None:
+    """Convert and check a sample once, outside any case's time limit: on a cold numba cache
+    (a fresh clone, two workers compiling at once) the first cases would otherwise spend their
+    limit compiling kernels and be reported as time-outs."""
+    from tests.fuzz.oracle import run_cli
+
+    sample = Path(__file__).resolve().parents[2] / "samples" / "butterfly.json"
+    out = folder / "warm-up.nc"
+    for args in (["convert", str(sample), "-o", str(out), "-q"],
+                 ["check", str(sample), str(out)]):
+        code, stderr, crash = run_cli(args, time_limit_s=600.0)
+        if code != 0 or crash:
+            raise RuntimeError(f"the warm-up run {args[0]} failed: {stderr}{crash}")
+    out.unlink()
 
 
 class Chunk:
