@@ -54,3 +54,20 @@ def test_points_around_a_corner_are_measured_against_their_own_leg() -> None:
     assert nearest[3] < 0.5 * R_MM  # once measured as 1.27 R_MM against the incoming leg
     assert foot[0] < foot[1] < CORNER_U < foot[3] < foot[4]
     assert foot[2] == pytest.approx(CORNER_U, abs=1e-12)
+
+
+TURNS = Path(__file__).parent / "data" / "check-turns"
+
+
+@pytest.mark.parametrize("name", ["path-deviation.ngc", "path-deviation-2.nc",
+                                  "tangential-jerk.ngc"])
+def test_a_point_past_a_sharp_turn_is_measured_against_the_nearest_leg(tmp_path: Path,
+                                                                       name: str) -> None:
+    """Fuzzer finds (tests/fuzz): points just past a sharp turn that the walk measured against the
+    leg before it, up to 8x the rounding allowance off a curve they lie on (brute force put one
+    at 1e-12 mm); check now looks again around the anchor before it calls a point off."""
+    machine = load_machine("default")
+    target = tmp_path / "out.nc"
+    convert_file(TURNS / name, target, machine)
+    report = check_files(TURNS / name, target, machine)
+    assert report.ok, "\n".join(map(str, report.violations))

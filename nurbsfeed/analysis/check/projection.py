@@ -23,6 +23,9 @@ PROJECT_WINDOW_STEPS = 3.0
 # A point the forward search leaves far from the curve is looked for again over the rest of the
 # curve: the best of this many evenly spaced parameters, refined by golden section.
 PROJECT_SCAN_SAMPLES = 4096
+# A point the walk leaves beyond accept_mm is looked for again this many PROJECT_STEP_MAX_REL
+# either side of the anchor (the same number of samples) before it counts as off the curve.
+PROJECT_LOCAL_STEPS = 4.0
 # g = C'.(C - P) is taken as positive only above this many units of rounding of |C'| |C|: C is
 # computed to a few ulps of the coordinates, and near a stop the true g is smaller than that.
 PROJECT_G_NOISE_EPS = 64.0
@@ -225,6 +228,25 @@ def _project_kernel(knots, cw, degree, targets, u_first, u_last, back_mm, accept
         if n_minima == 0:
             dist2, span = _distance2(knots, cw, degree, n_ctrl, u, span, tx, ty, tz, basis,
                                      dbasis, left, right, p, d)
+        if accept2 < dist2 <= anchor_mm * anchor_mm:
+            # near a sharp turn or a reversal the walk can settle on the wrong leg, leaving a
+            # point on the curve measured off it: before calling it a deviation, the nearest
+            # place within PROJECT_LOCAL_STEPS of the largest parameter step around the anchor
+            # (evenly sampled, then refined by golden section)
+            a = max(u_first, anchor - PROJECT_LOCAL_STEPS * step_max)
+            b = min(u_last, anchor + PROJECT_LOCAL_STEPS * step_max)
+            width = (b - a) / (PROJECT_SCAN_SAMPLES - 1)
+            best = -1
+            for q in range(PROJECT_SCAN_SAMPLES):
+                dq, span = _distance2(knots, cw, degree, n_ctrl, a + q * width, span, tx, ty,
+                                      tz, basis, dbasis, left, right, p, d)
+                if dq < dist2:
+                    dist2 = dq
+                    best = q
+            if best >= 0:
+                u, dist2, span = _golden(knots, cw, degree, n_ctrl, max(a, a + (best - 1) * width),
+                                         min(b, a + (best + 1) * width), a + best * width, dist2,
+                                         span, tx, ty, tz, basis, dbasis, left, right, p, d)
         if dist2 > anchor_mm * anchor_mm:
             width = (u_last - origin) / (PROJECT_SCAN_SAMPLES - 1)
             best = -1
