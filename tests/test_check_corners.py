@@ -17,6 +17,8 @@ import pytest
 
 from nurbsfeed.analysis import check_files
 from nurbsfeed.analysis.check import project_points
+from nurbsfeed.analysis.check.curve_checks import least_time_s
+from nurbsfeed.analysis.common import curve_blocks
 from nurbsfeed.machine import load_machine
 from nurbsfeed.pipeline import convert_file
 from nurbsfeed.program import CurveBlock
@@ -71,3 +73,20 @@ def test_a_point_past_a_sharp_turn_is_measured_against_the_nearest_leg(tmp_path:
     convert_file(TURNS / name, target, machine)
     report = check_files(TURNS / name, target, machine)
     assert report.ok, "\n".join(map(str, report.violations))
+
+
+def test_the_least_time_of_a_near_cusp_curve_stays_below_its_plan(tmp_path: Path) -> None:
+    """Fuzzer find: a slow (F5) curve with a near-cusp, whose length a Gauss rule over whole knot
+    spans put 0.7 % long, so check's lower bound on the time (288.75 s) exceeded the plan
+    (286.80 s) and called a correct program 'cut short'. The polygon under the curve is a
+    lower bound of its length whatever |C'| does."""
+    source = TURNS / "slow-near-cusp.json"
+    machine = load_machine("default")
+    target = tmp_path / "out.nc"
+    convert_file(source, target, machine)
+    report = check_files(source, target, machine)
+    assert report.ok, "\n".join(map(str, report.violations))
+    slow = [block for block in curve_blocks(source) if block.feed_mm_s.size][1]
+    polygon = np.linalg.norm(np.diff(slow.curve.point(np.linspace(0.0, 1.0, 1_000_001)),
+                                     axis=0), axis=1).sum()
+    assert least_time_s(slow, np.inf, machine.limits.acc_mm_s2) <= polygon / slow.feed_mm_s[0]

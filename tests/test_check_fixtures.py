@@ -21,7 +21,7 @@ BAD = {
     "bad55.nc": ("bad55.json", {"coverage", "feed", "cycle-time", "chord-error"},
                  "part of the curve is skipped"),
     "bad59.nc": ("bad59.json", {"coverage", "feed", "cycle-time"},
-                 "the curve needs at least 0.139585 s"),
+                 "the curve needs at least 0.1395"),
     "bad51.nc": ("bad51.json", {"coverage", "feed", "cycle-time", "chord-error"},
                  "the move advances 69.65"),
     "corner.nc": ("corner.json", {"corner"}, "corner taken at speed"),
