@@ -62,12 +62,14 @@ TURNS = Path(__file__).parent / "data" / "check-turns"
 
 
 @pytest.mark.parametrize("name", ["path-deviation.ngc", "path-deviation-2.nc",
+                                  "path-deviation-3.nc", "path-deviation-4.nc",
                                   "tangential-jerk.ngc"])
 def test_a_point_past_a_sharp_turn_is_measured_against_the_nearest_leg(tmp_path: Path,
                                                                        name: str) -> None:
     """Fuzzer finds (tests/fuzz): points just past a sharp turn that the walk measured against the
     leg before it, up to 8x the rounding allowance off a curve they lie on (brute force put one
-    at 1e-12 mm); check now looks again around the anchor before it calls a point off."""
+    at 1e-12 mm); check now looks again around the anchor, then along the whole curve, before it
+    calls a point off."""
     machine = load_machine("default")
     target = tmp_path / "out.nc"
     convert_file(TURNS / name, target, machine)

@@ -26,6 +26,7 @@ PROJECT_SCAN_SAMPLES = 4096
 # A point the walk leaves beyond accept_mm is looked for again this many PROJECT_STEP_MAX_REL
 # either side of the anchor (the same number of samples) before it counts as off the curve.
 PROJECT_LOCAL_STEPS = 4.0
+NEAREST_SAMPLES = 4097  # per level of `nearest_distance_mm`'s two-level search
 # g = C'.(C - P) is taken as positive only above this many units of rounding of |C'| |C|: C is
 # computed to a few ulps of the coordinates, and near a stop the true g is smaller than that.
 PROJECT_G_NOISE_EPS = 64.0
@@ -277,7 +278,32 @@ def project_points(curve: NurbsCurve, targets: np.ndarray, back_mm: float, accep
     counts as on the curve; anchor_mm: a point this near moves the search on."""
     u = np.empty(len(targets))
     dist = np.empty(len(targets))
-    _project_kernel(curve.knots, curve.homogeneous, curve.degree,
-                    np.ascontiguousarray(targets, dtype=float), curve.u_min, curve.u_max,
-                    back_mm, accept_mm, anchor_mm, u, dist)
+    targets = np.ascontiguousarray(targets, dtype=float)
+    _project_kernel(curve.knots, curve.homogeneous, curve.degree, targets, curve.u_min,
+                    curve.u_max, back_mm, accept_mm, anchor_mm, u, dist)
+    off = np.flatnonzero(dist > accept_mm)
+    if off.size:
+        foot, nearest = nearest_on_curve(curve, targets[off])
+        better = nearest < dist[off]
+        u[off[better]] = foot[better]
+        dist[off[better]] = nearest[better]
     return u, dist
+
+
+def nearest_on_curve(curve: NurbsCurve, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Foot parameter and distance of each point (M, 3) on the whole curve, by sampling: a point
+    the ordered walk measured off the curve is measured again against every part of it before it
+    counts as a deviation (past a sharp turn or a reversal the walk can hold on to the wrong
+    leg). The samples' nearest is refined once, evenly around it; the distance is never below the
+    true one by more than the refined samples' sag."""
+    u = np.linspace(curve.u_min, curve.u_max, NEAREST_SAMPLES)
+    on_curve = curve.point(u)
+    foot = np.empty(len(targets))
+    out = np.empty(len(targets))
+    for i, target in enumerate(targets):
+        k = int(np.argmin(np.sum((on_curve - target) ** 2, axis=1)))
+        fine = np.linspace(u[max(k - 1, 0)], u[min(k + 1, u.size - 1)], NEAREST_SAMPLES)
+        d2 = np.sum((curve.point(fine) - target) ** 2, axis=1)
+        best = int(np.argmin(d2))
+        foot[i], out[i] = fine[best], np.sqrt(d2[best])
+    return foot, out
