@@ -432,7 +432,8 @@ def convert(inputs: tuple[str, ...], output: Path | None, method: str, dialect: 
             sys.exit(EXIT_BAD_INPUT)
         if output is not None and not quiet:
             r = results[0]
-            click.echo(f"{r['source']}: {r['curves']} curves, {r['points']:,} points, "
+            curves = "1 curve" if r["curves"] == 1 else f"{r['curves']} curves"
+            click.echo(f"{r['source']}: {curves}, {r['points']:,} points, "
                        f"cycle {r['cycle_s']:.3f} s -> {r['target']}", err=True)
         return
     if not quiet or failed:

@@ -38,7 +38,7 @@ def test_convert_json_writes_a_complete_program_with_trace(tmp_path: Path) -> No
     code, stdout, stderr = run("convert", str(SAMPLES / "quarter-circle.json"), "-o", str(out),
                                "--machine", "paper-table1", "--trace", str(trace))
     assert code == 0 and stdout == ""
-    assert "1 curves" in stderr and str(out) in stderr
+    assert ": 1 curve, " in stderr and str(out) in stderr
     text = out.read_text()
     lines = text.splitlines()
     assert lines[1] == "G21 G90" and lines[2] == "G0 X10. Y0. Z0." and lines[-1] == "M2"
