@@ -69,8 +69,9 @@ def _alarm(signum: int, frame: object) -> None:
         raise CaseTimeout
 
 
-def run_cli(args: list[str], time_limit_s: float = TIME_LIMIT_S) -> tuple[int | None, str, str]:
+def run_cli(args: list[str], time_limit_s: float | None = None) -> tuple[int | None, str, str]:
     """nurbsfeed ARGS in this process: (exit code, stderr, traceback text or "")."""
+    time_limit_s = TIME_LIMIT_S if time_limit_s is None else time_limit_s
     import traceback
 
     global _armed
