@@ -78,6 +78,26 @@ def _golden(knots, cw, degree, n_ctrl, a, b, u, dist2, span, tx, ty, tz, basis, 
 
 
 @jit
+def _scan(knots, cw, degree, n_ctrl, a, b, u, dist2, span, tx, ty, tz, basis, dbasis, left,
+          right, p, d):
+    """The nearest of PROJECT_SCAN_SAMPLES even parameters on [a, b], refined by golden section,
+    if it is nearer than the best so far (u, dist2): returns (u, dist2, span)."""
+    width = (b - a) / (PROJECT_SCAN_SAMPLES - 1)
+    best = -1
+    for q in range(PROJECT_SCAN_SAMPLES):
+        dq, span = _distance2(knots, cw, degree, n_ctrl, a + q * width, span, tx, ty, tz, basis,
+                              dbasis, left, right, p, d)
+        if dq < dist2:
+            dist2 = dq
+            best = q
+    if best >= 0:
+        u, dist2, span = _golden(knots, cw, degree, n_ctrl, max(a, a + (best - 1) * width),
+                                 min(b, a + (best + 1) * width), a + best * width, dist2, span,
+                                 tx, ty, tz, basis, dbasis, left, right, p, d)
+    return u, dist2, span
+
+
+@jit
 def _project_kernel(knots, cw, degree, targets, u_first, u_last, back_mm, accept_mm, anchor_mm,
                     u_out, dist_out):
     """Foot parameters of targets (N, 3), in order: u_out (N,), distances dist_out (N,).
@@ -234,35 +254,13 @@ def _project_kernel(knots, cw, degree, targets, u_first, u_last, back_mm, accept
             # point on the curve measured off it: before calling it a deviation, the nearest
             # place within PROJECT_LOCAL_STEPS of the largest parameter step around the anchor
             # (evenly sampled, then refined by golden section)
-            a = max(u_first, anchor - PROJECT_LOCAL_STEPS * step_max)
-            b = min(u_last, anchor + PROJECT_LOCAL_STEPS * step_max)
-            width = (b - a) / (PROJECT_SCAN_SAMPLES - 1)
-            best = -1
-            for q in range(PROJECT_SCAN_SAMPLES):
-                dq, span = _distance2(knots, cw, degree, n_ctrl, a + q * width, span, tx, ty,
-                                      tz, basis, dbasis, left, right, p, d)
-                if dq < dist2:
-                    dist2 = dq
-                    best = q
-            if best >= 0:
-                u, dist2, span = _golden(knots, cw, degree, n_ctrl, max(a, a + (best - 1) * width),
-                                         min(b, a + (best + 1) * width), a + best * width, dist2,
-                                         span, tx, ty, tz, basis, dbasis, left, right, p, d)
+            u, dist2, span = _scan(knots, cw, degree, n_ctrl,
+                                   max(u_first, anchor - PROJECT_LOCAL_STEPS * step_max),
+                                   min(u_last, anchor + PROJECT_LOCAL_STEPS * step_max), u,
+                                   dist2, span, tx, ty, tz, basis, dbasis, left, right, p, d)
         if dist2 > anchor_mm * anchor_mm:
-            width = (u_last - origin) / (PROJECT_SCAN_SAMPLES - 1)
-            best = -1
-            for q in range(PROJECT_SCAN_SAMPLES):
-                dq, span = _distance2(knots, cw, degree, n_ctrl, origin + q * width, span, tx,
-                                      ty, tz, basis, dbasis, left, right, p, d)
-                if dq < dist2:
-                    dist2 = dq
-                    best = q
-            if best >= 0:
-                u, dist2, span = _golden(knots, cw, degree, n_ctrl,
-                                         max(origin, origin + (best - 1) * width),
-                                         min(u_last, origin + (best + 1) * width),
-                                         origin + best * width, dist2, span, tx, ty, tz, basis,
-                                         dbasis, left, right, p, d)
+            u, dist2, span = _scan(knots, cw, degree, n_ctrl, origin, u_last, u, dist2, span, tx,
+                                   ty, tz, basis, dbasis, left, right, p, d)
         u_out[i] = u
         dist_out[i] = math.sqrt(dist2)
         if dist_out[i] <= anchor_mm:
