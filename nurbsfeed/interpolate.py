@@ -72,6 +72,9 @@ LANDING_MARGIN_REL = 1e-8  # the first run's sigma lies this far (relative) abov
 BUMP_PERIODS = 32
 BUMP_MAX_SLOWDOWN = 1e-4
 CHORD_ITERATIONS = 200
+# rk2c: a step across a knot whose chord is still this far (relative) from its target after two
+# corrections is solved exactly (a knot where |C'| jumps: a rational curve of degree 1)
+KNOT_CHORD_REL = 1e-9
 EPS = float(np.finfo(float).eps)
 
 
@@ -170,10 +173,13 @@ def step_spans(method, knots, coef, degree, n_spans, u0, ds, sigma, slow_speed, 
                 if not slow:
                     ut = u + 0.5 * h * (k1 + 1.0 / sp2)
                     s3 = find_span(knots, degree, n_ctrl, ut, s2)
-                    # Across a knot C'' jumps and one correction from u~ can leave the chord
-                    # off by 0.4 % (a 10 % acceleration spike, from positions): correct again
-                    # from the corrected u there (Newton on the chord), only at those steps.
-                    for _ in range(1 if s3 == span else 2):
+                    # Across a knot C'' (or, at a knot of multiplicity `degree`, C' itself)
+                    # jumps and one correction from u~ can leave the chord off by 0.4 % (a 10 %
+                    # acceleration spike, from positions): correct again from the corrected u
+                    # there (Newton on the chord), only at those steps, and if the chord is
+                    # still off, solve it exactly.
+                    crossed = s2 != span or s3 != span
+                    for _ in range(2 if crossed else 1):
                         qx, qy, qz, tx, ty, tz = point_d1(knots, coef, degree, s3, ut)
                         ex = qx - px
                         ey = qy - py
@@ -189,6 +195,14 @@ def step_spans(method, knots, coef, degree, n_spans, u0, ds, sigma, slow_speed, 
                                 du = -2.0 * c3 / den
                         ut = ut + du
                         s3 = find_span(knots, degree, n_ctrl, ut, s3)
+                    if crossed or s3 != span:
+                        qx, qy, qz, _, _, _ = point_d1(knots, coef, degree, s3, ut)
+                        chord = math.sqrt((qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2)
+                        if abs(chord - h) > KNOT_CHORD_REL * h:
+                            u = u + _chord_step(knots, coef, degree, n_ctrl, u, px, py, pz, h,
+                                                min(ut - u, u_range) if ut > u else h / speed,
+                                                span)
+                            continue
                     u = ut
                     continue
         guess = h / slow_speed if speed < slow_speed else h / speed

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -9,6 +11,7 @@ from nurbsfeed.analysis import time_optimal_bound_s
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.geometry.nurbs import curvature_from_derivatives
 from nurbsfeed.interpolate import BUMP_MAX_SLOWDOWN, BUMP_PERIODS, METHODS, interpolate
+from nurbsfeed.machine import load_machine
 from nurbsfeed.planning.limits import Limits, curvature_threshold
 from nurbsfeed.planning.planner import KIND_PEAK, plan_curve
 from tests import naive_nurbs
@@ -252,3 +255,22 @@ def test_the_uniform_slowdown_keeps_the_limits_the_fix_rounds_left() -> None:
     assert plan.uniform_slowdown > 1.1
     assert plan.time_scale >= plan.uniform_slowdown
     assert_within(curve, interpolate(plan, "rk2c"), lim)
+
+
+def test_a_step_across_a_knot_where_the_parametric_speed_jumps_keeps_its_chord() -> None:
+    # Degree 1, rational: each span is straight, but its parametric speed |C'| differs from the
+    # next one's (by 26 % at the knot 11/12 below), so one Newton correction taken on the wrong
+    # side of the knot left a chord 0.58 % long at F300 under the default profile (found by
+    # the fuzzer: the safety guard refused the curve). That chord must equal its target.
+    limits = dataclasses.replace(load_machine("default").limits, feed_mm_s=5.0)
+    curve = NurbsCurve.build(1, np.array([0, 0, 1, 11, 12, 12]) / 12.0,
+                             [[2, 3], [4.901, 0], [0.473, 0], [0.193, 0]],
+                             weights=[1.0, 0.5, 0.5, 1.0])
+    before, after = curve.speed(np.array([10.99, 11.01]) / 12)
+    assert after / before > 1.2
+    result = interpolate(plan_curve(curve, limits), "rk2c")
+    crossing = np.flatnonzero((result.u[:-1] < 11 / 12) & (result.u[1:] > 11 / 12))
+    assert crossing.size == 1
+    fluctuation = result.feed_fluctuation()
+    assert fluctuation[crossing[0]] <= 1e-6
+    assert fluctuation.max() <= 1e-5  # design §3: rk2c's bound everywhere
