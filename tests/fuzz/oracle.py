@@ -39,9 +39,10 @@ _GENERATED = re.compile(rb"(?:G1 )?" + _MOVE_WORD + rb"(?: " + _MOVE_WORD + rb")
 _NUMBER = re.compile(rb"[XYZF](-?[0-9]*\.?[0-9]*)")
 _COMMENT = re.compile(rb"\([^)]*\)|;.*")
 # A line a NURBS block consumes (and nurbsfeed therefore drops): a NURBS G code, or a word only
-# NURBS blocks carry, or a lone F (LinuxCNC allows one on a line of a G5.2 block).
-_BLOCK_LINE = re.compile(rb"[Gg][ \t]*0*[56][ \t]*\.[ \t]*[23]|[KkPpLlRrQq]"
-                         rb"|^[ \t]*(?:[Nn][ \t]*[0-9]+[ \t]*)?[Ff]")
+# NURBS blocks carry, or a lone F (LinuxCNC allows one on a line of a G5.2 block). Spaces are the
+# tokenizer's: a lone CR inside a line is one ("G\r5.3" is G5.3).
+_BLOCK_LINE = re.compile(rb"[Gg][ \t\r]*0*[56][ \t\r]*\.[ \t\r]*[23]|[KkPpLlRrQq]"
+                         rb"|^[ \t\r]*(?:[Nn][ \t\r]*[0-9]+[ \t\r]*)?[Ff]")
 _LOCATED = r"^{}(?::\d+:\d+)?: \S"
 
 
