@@ -31,6 +31,7 @@ number of lines.
 
 from __future__ import annotations
 
+import itertools
 from collections import deque
 from collections.abc import Iterator
 from pathlib import Path
@@ -138,10 +139,13 @@ class _Reader:
         positions agree; a point line is ASCII): the number of lines it read, now consumed."""
         assert isinstance(self.open, NurbsCurveReader), "called inside a G06.2 / G6.2 curve"
         batch = ahead.peek(point_lines.RUN_LINES)
-        n_ascii = next((i for i, text in enumerate(batch) if not text.isascii()), len(batch))
-        if not n_ascii:
-            return 0
-        n, _ = self.open.take_run(point_lines.ProgramCodes("".join(batch[:n_ascii])), 0, line)
+        text = "".join(batch)
+        if not text.isascii():  # rare: find the first line that is not
+            n_ascii = next(i for i, line_text in enumerate(batch) if not line_text.isascii())
+            if not n_ascii:
+                return 0
+            text = "".join(batch[:n_ascii])
+        n, _ = self.open.take_run(point_lines.ProgramCodes(text), 0, line)
         ahead.drop(n)
         return n
 
@@ -234,7 +238,7 @@ class _LookAhead:
             if line is None:
                 break
             self.ahead.append(line)
-        return list(self.ahead)[:n]
+        return list(itertools.islice(self.ahead, n))
 
     def drop(self, n: int) -> None:
         """Take the next `n` lines, already peeked."""
