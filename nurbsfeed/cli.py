@@ -18,11 +18,12 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 
 from nurbsfeed import __version__
+from nurbsfeed.choices import DIALECTS, METHOD_NAMES
 from nurbsfeed.errors import (
     EXIT_BAD_INPUT,
     EXIT_BROKEN_PIPE,
@@ -32,9 +33,10 @@ from nurbsfeed.errors import (
     Location,
     NurbsfeedError,
 )
-from nurbsfeed.interpolate import METHODS
-from nurbsfeed.machine import FLOAT_KEYS, INT_KEYS, Machine, load_machine
-from nurbsfeed.readers import DIALECTS, read_program
+from nurbsfeed.machine import FLOAT_KEYS, INT_KEYS, load_machine
+
+if TYPE_CHECKING:
+    from nurbsfeed.machine import Machine
 
 TAYLOR1_WARNING = ("nurbsfeed: warning: taylor1 is the paper's first-order baseline; its points "
                    "drift off the planned feed by up to a few percent, which can break the "
@@ -131,7 +133,7 @@ def machine_from(kwargs: dict[str, Any]) -> Machine:
     return load_machine(kwargs.pop("machine"), overrides)
 
 
-method_option = click.option("--method", type=click.Choice(list(METHODS)), default="rk2c",
+method_option = click.option("--method", type=click.Choice(list(METHOD_NAMES)), default="rk2c",
                              show_default=True, help="Interpolator (docs/design.md §3).")
 dialect_option = click.option("--dialect", type=click.Choice(list(DIALECTS)),
                               default="auto", show_default=True,
@@ -471,6 +473,7 @@ def plan(input: Path, dialect: str, **kwargs: Any) -> None:
     from nurbsfeed.planning.planner import KIND_NAMES
     from nurbsfeed.planning.scurve import transition_distance_mm
     from nurbsfeed.program import CurveBlock
+    from nurbsfeed.readers import read_program
 
     machine = machine_from(kwargs)
     index = 0

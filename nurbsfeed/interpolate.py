@@ -54,12 +54,13 @@ from functools import cached_property
 
 import numpy as np
 
+from nurbsfeed.choices import METHOD_NAMES
 from nurbsfeed.geometry.kernel import find_span, point_d1
 from nurbsfeed.jit import jit
 from nurbsfeed.planning.planner import Plan
 from nurbsfeed.planning.timelaw import TimeLaw, evaluate
 
-METHODS = {"taylor1": 0, "rk4": 1, "rk2c": 2}
+METHODS = {name: code for code, name in enumerate(METHOD_NAMES)}  # name -> kernel code
 CHUNK_PERIODS = 65536  # periods of a stretch sampled, stepped or held in memory at a time
 SLOW_SPEED_REL = 1e-3  # |C'| below this fraction of the mean |C'| is treated as "zero"
 # rk2c / rk4: when |C'| changes by more than this fraction across one step, the step is next to

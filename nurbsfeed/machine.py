@@ -14,12 +14,14 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
 
 from nurbsfeed.errors import Location, ProfileError
-from nurbsfeed.planning.limits import Limits
+
+if TYPE_CHECKING:  # imported where a profile is loaded: numpy is not needed before that
+    from nurbsfeed.planning.limits import Limits
 
 
 @dataclass(frozen=True)
@@ -158,6 +160,8 @@ def machine_from_mapping(data: Any, where: str, places: Mapping[str, Location] |
                        ("move_periods", "min_block_time_s", "period_s"), places, overrides,
                        here)
     values["period_s"] = move_s  # what the planner, the stepping and the writer step by
+    from nurbsfeed.planning.limits import Limits
+
     limits = Limits(**{field: values.pop(key) for key, field in LIMIT_KEYS.items()})
     if "decimals" not in values:
         values["decimals"] = auto_decimals(limits, limits.period_s / move_periods)

@@ -22,3 +22,16 @@ def test_every_package_of_the_tree_is_listed_in_pyproject() -> None:
     assert setup["package-dir"]["nurbsfeed.configs"] == "configs"
     assert (ROOT / "configs" / "__init__.py").is_file()
     assert listed - on_disk == {"nurbsfeed.configs"}
+
+
+def test_the_command_line_loads_without_numpy_or_numba_until_a_command_needs_them() -> None:
+    # `nurbsfeed --help` / `--version` and click's option parsing must not pay for the
+    # pipeline's imports (~0.3 s): they are taken inside the commands
+    import subprocess
+    import sys
+
+    probe = ("import sys, nurbsfeed.cli; "
+             "print(sorted(m for m in ('numpy', 'numba', 'scipy') if m in sys.modules))")
+    loaded = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                            check=True).stdout.strip()
+    assert loaded == "[]"

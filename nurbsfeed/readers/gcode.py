@@ -36,6 +36,7 @@ from collections import deque
 from collections.abc import Iterator
 from pathlib import Path
 
+from nurbsfeed.choices import DIALECTS
 from nurbsfeed.errors import InputError, Location
 from nurbsfeed.files import BOM
 from nurbsfeed.gcode import point_lines
@@ -45,8 +46,6 @@ from nurbsfeed.gcode.modal import AXES, G5_2, G5_3, G6_2, NO_POSITION_EFFECT, Mo
 from nurbsfeed.gcode.nurbs_block import FinishedCurve, first_word, motion_words
 from nurbsfeed.gcode.tokenizer import Block, Param, tokenize_line
 from nurbsfeed.program import CurveBlock, PassThrough, ProgramItem
-
-DIALECTS = ("auto", "fanuc", "linuxcnc")
 
 
 def read_gcode(path: Path, lines: Iterator[str], dialect: str = "auto"
