@@ -10,6 +10,7 @@ themselves keep the limits (their jerk from the trace: 49,939 mm/s^3 at most).
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -92,3 +93,62 @@ def test_the_least_time_of_a_near_cusp_curve_stays_below_its_plan(tmp_path: Path
     polygon = np.linalg.norm(np.diff(slow.curve.point(np.linspace(0.0, 1.0, 1_000_001)),
                                      axis=0), axis=1).sum()
     assert least_time_s(slow, np.inf, machine.limits.acc_mm_s2) <= polygon / slow.feed_mm_s[0]
+
+
+@pytest.mark.parametrize("name", ["hairpin-chord-error.ngc", "cusp-tangential-jerk.ngc",
+                                  "corner-turn-back-jerk.nc", "inch-corner-path-deviation.ngc",
+                                  "reversal-path-deviation.ngc"])
+def test_points_around_a_turn_back_are_measured_on_the_leg_the_motion_is_on(
+        tmp_path: Path, name: str) -> None:
+    """Fuzzer finds (tests/fuzz): at a turn of nearly 180 degrees (a cubic running out along X
+    and back, a cusp of collinear control points, a polyline corner of 171 degrees) both legs lie
+    within rounding of the points beside the tip, and the walk took the leg before the turn for
+    points after it, or walked that leg backwards: tangential jerk up to 45x, acceleration 24x,
+    chord error 12x, path deviation 1.1-15x, on outputs whose traced positions keep every limit
+    (the check given the trace's own parameters passes). Written points on the way back repeat
+    the ones on the way out exactly (corner-turn-back-jerk, cusp-tangential-jerk)."""
+    machine = load_machine("default")
+    target = tmp_path / "out.nc"
+    convert_file(TURNS / name, target, machine)
+    report = check_files(TURNS / name, target, machine)
+    assert report.ok, "\n".join(map(str, report.violations))
+
+
+def _first_turn_back(lines: list[str]) -> int:
+    """Index of the first written point of curve 0 after which X decreases (its moves run out
+    along X first)."""
+    start = next(i for i, line in enumerate(lines) if line.startswith("(nurbsfeed: curve 0"))
+    previous = (-1, -np.inf)
+    for i in range(start + 1, len(lines)):
+        word = re.match(r"(?:G1 )?X(-?[\d.]+)", lines[i])
+        if word:
+            if float(word.group(1)) < previous[1]:
+                return previous[0]
+            previous = (i, float(word.group(1)))
+    raise AssertionError("no turn back in curve 0")
+
+
+@pytest.mark.parametrize("broken", ["lifted", "cut"])
+def test_a_real_violation_beside_a_turn_back_is_still_caught(tmp_path: Path, broken: str) -> None:
+    """The leg rules never hide a broken motion at a turn: a written point lifted 1 um off the
+    curve (100 times the rounding) is a path deviation, and the motion cut across the turn (the
+    13 moves around its tip removed, so the points jump back at speed) breaks the tangential
+    jerk on the points before the cut."""
+    source = TURNS / "hairpin-chord-error.ngc"
+    machine = load_machine("default")
+    target = tmp_path / "out.nc"
+    convert_file(source, target, machine)
+    lines = target.read_text().splitlines(keepends=True)
+    tip = _first_turn_back(lines)
+    assert " F0.6" in lines[tip]  # the planner rests there
+    if broken == "lifted":
+        assert "Z" not in lines[tip]
+        lines[tip] = lines[tip].replace(" F", " Z0.00169 F")  # the point before is at Z0.00069
+        expected = {("path-deviation", tip + 1)}
+    else:
+        del lines[tip - 6:tip + 7]
+        expected = {("tangential-jerk", line) for line in range(tip - 15, tip - 5)}
+    target.write_text("".join(lines))
+    report = check_files(source, target, machine)
+    found = {(v.check, int(v.where.rsplit(":", 1)[1])) for v in report.violations}
+    assert found & expected, "\n".join(map(str, report.violations))

@@ -31,10 +31,18 @@ from nurbsfeed.program import MM_PER_UNIT, CurveBlock
 # branch) over the local minima of |C(u) - P|, brackets each on g(u) = C'(u).(C(u) - P) and
 # bisects it. Where C' = 0 (a corner, cusp or reversal, coincident control points) g = 0 without
 # a minimum: the search goes on past it. Of the minima within r it takes the one nearest the
-# parameter's own pace (at a reversal the point after the turn is as near the way out as the way
-# back); with none within r, the nearest; a point it leaves far from the curve is looked for
-# again over the rest of the curve. A point farther than ANCHOR_ROUNDINGS * (r + delta) from the
-# curve does not move the search on, so one bad point does not derail the ones after it.
+# parameter's own pace; with none within r, the nearest; a point it leaves far from the curve is
+# looked for again over the rest of the curve. A point farther than ANCHOR_ROUNDINGS * (r + delta)
+# from the curve does not move the search on, so one bad point does not derail the ones after it.
+# At a turn of nearly 180 degrees (a cusp, a corner, a hairpin) both legs can lie within r of the
+# points beside the tip, so geometry alone cannot say which leg a point is on; the order of the
+# points does, as the motion's parameter never runs back: (1) the search's anchor never moves
+# back, so no leg is walked backwards; (2) a foot more than 2 r of chord behind the anchor is
+# the leg before the turn (rounding puts a foot at most that far back) and counts only as the
+# nearest so far; (3) the motion rests on a corner and the stepping writes a point there: once
+# the anchor is past a corner or written within r of it, the points after it are past it too.
+# Left ambiguous are only feet up to 2 r of chord behind the anchor; e_i below does not widen
+# for them (no case of the fuzzer needs it: the outputs it found pass within e_i).
 #
 # Times: a move covering n periods ends n T after the previous one; n comes from its segment time
 # |dP^| / (F/60) (P^ the written coordinates), which must be a whole number of periods.
