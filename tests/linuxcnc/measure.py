@@ -8,6 +8,10 @@ time between two planned instants (the ends of the first and the second-to-last 
 crossing found between samples) divided by the planned time between them is the cycle ratio:
 1 means the machine followed the planned feed. The path error is the largest distance of a
 sample in that stretch from the exact curve (nurbsfeed's own projection, the one `check` uses).
+The first and the last move are left out of that ratio because the machine's departure and
+arrival are only known to a servo period; the rest-to-rest ratio takes them in (the machine's
+time from the last sample at the start to the first at the end over the planned cycle), to a
+servo period: it shows what a move from or into rest costs (README "Running on LinuxCNC").
 """
 
 from __future__ import annotations
@@ -42,10 +46,16 @@ class CurveRun:
     # servo periods in that stretch without motion: LinuxCNC's queue ran empty (its task did
     # not keep up in real time) or a move ended in a full stop
     standstill_periods: int
+    planned_cycle_s: float  # the whole curve, rest to rest (the F words' sum)
+    rest_to_rest_s: float  # the machine's time from leaving the start to reaching the end
 
     @property
     def cycle_ratio(self) -> float:
         return self.measured_s / self.planned_s
+
+    @property
+    def rest_to_rest_ratio(self) -> float:
+        return self.rest_to_rest_s / self.planned_cycle_s
 
 
 def curve_blocks(source: Path) -> list[CurveBlock]:
@@ -90,10 +100,15 @@ def _measure_curve(block: CurveBlock, written: WrittenCurve, samples: np.ndarray
     _, distance = project_points(block.curve, inside_samples, PROJECTION_BACK_MM / scale,
                                  PROJECTION_ACCEPT_MM / scale, PROJECTION_BACK_MM / scale)
     standing = np.all(inside_samples[1:] == inside_samples[:-1], axis=1)
+    # the last sample still at the start, the first at the end
+    left = sample_index[int(np.argmax(sample_times > 0.0)) - 1]
+    reached = sample_index[int(np.argmax(sample_times >= times[-1]))]
     run = CurveRun(planned_s=planned_to - planned_from,
                    measured_s=(measured_to - measured_from) * SERVO_PERIOD_S,
                    path_error_mm=float(np.max(distance)) * scale,
-                   standstill_periods=int(np.count_nonzero(standing)))
+                   standstill_periods=int(np.count_nonzero(standing)),
+                   planned_cycle_s=float(times[-1]),
+                   rest_to_rest_s=float(reached - left) * SERVO_PERIOD_S)
     return run, int(sample_index[-1]) + 1
 
 
