@@ -39,6 +39,8 @@ class Machine:
     feed_decimals: int = 3  # F word decimals (more when F is small; see gcode.writer)
     move_periods: int = 1  # controller periods per written move
     min_block_time_s: float = 0.0  # the controller's floor on one block's time
+    # the shortest move from or into a rest (pipeline.RestMoves); 0: a move a period there too
+    rest_move_s: float = 0.0
 
     @property
     def controller_period_s(self) -> float:
@@ -52,7 +54,7 @@ LIMIT_KEYS = {"period_s": "period_s", "max_feed_mm_s": "feed_mm_s",
               "max_jerk_mm_s3": "jerk_mm_s3", "max_normal_acc_mm_s2": "normal_acc_mm_s2",
               "max_normal_jerk_mm_s3": "normal_jerk_mm_s3"}
 REQUIRED_KEYS = tuple(LIMIT_KEYS)  # the others have the Machine's default (decimals: auto)
-FLOAT_KEYS = REQUIRED_KEYS + ("max_curve_time_s", "min_block_time_s")
+FLOAT_KEYS = REQUIRED_KEYS + ("max_curve_time_s", "min_block_time_s", "rest_move_s")
 INT_KEYS = ("decimals", "feed_decimals", "move_periods")
 # The accepted values, ends included (README "Profile keys" says why each is physical).
 RANGES: dict[str, tuple[float, float]] = {
@@ -65,6 +67,7 @@ RANGES: dict[str, tuple[float, float]] = {
     "max_normal_jerk_mm_s3": (1e-3, 1e10),
     "max_curve_time_s": (1e-3, 1e6),
     "min_block_time_s": (0.0, 1.0),
+    "rest_move_s": (0.0, 1.0),
     "decimals": (0, 8),
     "feed_decimals": (0, 6),
     "move_periods": (1, 1000),

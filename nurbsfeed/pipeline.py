@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import math
 import shutil
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -24,13 +25,17 @@ from nurbsfeed.files import ENCODING, ERRORS, atomic_output
 from nurbsfeed.gcode.writer import MoveWriter, cycle_comment, rapid_line
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.interpolate import PointChunk, Stepping
-from nurbsfeed.machine import Machine
+from nurbsfeed.machine import FLOOR_MARGIN, Machine
 from nurbsfeed.planning.planner import Plan, plan_curve
 from nurbsfeed.program import CurveBlock, PassThrough, ProgramItem
 from nurbsfeed.readers import read_program
 from nurbsfeed.safety import MotionGuard, feed_cap_mm_s
 
 TRACE_HEADER = "curve,k,t,u,s,v,a,j,x,y,z\n"
+# curve points, evenly spaced in u, on which a longer move at a rest is held to the chord
+# tolerance (`RestMoves`): near a rest the arc is a few micrometres long and barely bent, its
+# distance from the chord a smooth bump that 64 intervals resolve to a fraction of a nanometre
+REST_CHORD_SAMPLES = 65
 TRACE_ROW = ",".join(["%d", "%d"] + ["%.17g"] * 9) + "\n"
 
 
@@ -74,6 +79,123 @@ def plan_block(block: CurveBlock, machine: Machine) -> Plan:
                           machine.max_curve_time_s)
     except CurveError as exc:
         raise exc.at(block.location) from None
+
+
+def rest_move_periods(machine: Machine) -> int:
+    """Planned periods in a move from or into a rest: the fewest that last `rest_move_s` (1: a
+    move a period, the profile asks for nothing)."""
+    move_s = machine.limits.period_s
+    return max(1, math.ceil(machine.rest_move_s / move_s * (1.0 - FLOOR_MARGIN)))
+
+
+class RestMoves:
+    """The moves from and into a rest, each made of up to `periods` planned periods, for a
+    controller that runs a move near rest slowly (profile key `rest_move_s`).
+
+    LinuxCNC runs a tangent move shorter than its ramp cutoff (1 / ARC_BLEND_RAMP_FREQ: 10 ms)
+    at one constant acceleration, from the speed it enters with to the speed it leaves with, the
+    smaller of its F and the next (README "Running on LinuxCNC"). The first move from a rest is
+    entered at 0: it takes twice its planned time. A longer move is run as a trapezoid instead,
+    at the machine's acceleration up to its F (at a rest F is small: reached at once). So the
+    first planned periods after a rest, and the last before one, are written as one move each.
+
+    Every written point stays a planned point and the writer's F stays |dP^| / duration: the
+    points inside a merged move are handed on as copies of its start, which round onto the last
+    written point, so the writer drops them and gives their periods to the move onto the
+    merged move's end: the F words still add up to the planned cycle. A merged move is held to the
+    chord tolerance every move meets: the curve between its ends (REST_CHORD_SAMPLES points) is
+    within `chord_mm` of its chord, else it spans fewer periods (one period is the plan's own
+    move, written as planned). Near a rest it fits with room to spare: from rest the arc after
+    t is at most J t^3 / 6 (8.3 um in 10 ms at 50,000 mm/s^3), and an arc of length l bent by
+    kappa is kappa l^2 / 8 from its chord (0.9 nm at kappa = 0.1 /mm).
+
+    The last `periods` points given are held until the next ones (or the end) show whether a
+    rest follows them: memory stays one chunk and `periods` points.
+    """
+
+    def __init__(self, curve: NurbsCurve, chord_mm: float, periods: int) -> None:
+        self.curve = curve
+        self.chord_mm = chord_mm
+        self.periods = periods
+        self.stretch: object = None  # the stretch between rests the held points belong to
+        self.at_rest = True  # the next move to hand on is the first after a rest
+        self.held_u = np.empty(0)
+        self.held_points = np.empty((0, 3))
+        self.anchor_u = 0.0  # the last point handed on
+        self.anchor_point = np.zeros(3)
+
+    def take(self, chunk: PointChunk) -> np.ndarray:
+        """The points (K, 3) to hand to the writer now for the chunk's points."""
+        if chunk.stretch is None:  # the curve's first point: where its first move starts
+            self.anchor_u = float(chunk.u[0])
+            self.anchor_point = chunk.points[0]
+            return np.empty((0, 3))
+        done = []
+        if self.stretch is not None and chunk.stretch is not self.stretch:
+            done.append(self.finish())  # the held stretch ended at a rest
+        self.stretch = chunk.stretch
+        u = np.concatenate([self.held_u, chunk.u])
+        points = np.concatenate([self.held_points, chunk.points])
+        if self.at_rest:
+            if len(u) < self.periods:
+                self.held_u, self.held_points = u, points
+                return np.concatenate(done) if done else np.empty((0, 3))
+            first, u, points = self._first_move(u, points)
+            done.append(first)
+        ready = len(u) - min(len(u), self.periods)
+        if ready:
+            done.append(points[:ready])
+            self.anchor_u, self.anchor_point = float(u[ready - 1]), points[ready - 1]
+        self.held_u, self.held_points = u[ready:], points[ready:]
+        return np.concatenate(done) if done else np.empty((0, 3))
+
+    def finish(self) -> np.ndarray:
+        """The held points, which end at a rest: the last move into it merged."""
+        u, points = self.held_u, self.held_points
+        done = []
+        if self.at_rest and len(u):
+            first, u, points = self._first_move(u, points)
+            done.append(first)
+        if len(u):
+            spans = next((n for n in range(len(u), 1, -1)
+                          if self._fits(*self._point_before_last(u, points, n), u[-1],
+                                        points[-1])), 1)
+            last = points.copy()
+            last[len(u) - spans:-1] = self._point_before_last(u, points, spans)[1]
+            done.append(last)
+            self.anchor_u, self.anchor_point = float(u[-1]), points[-1]
+        self.held_u, self.held_points = np.empty(0), np.empty((0, 3))
+        self.at_rest = True
+        return np.concatenate(done) if done else np.empty((0, 3))
+
+    def _first_move(self, u: np.ndarray, points: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The first move after a rest, as points to hand on, and the points after it."""
+        spans = next((n for n in range(min(len(u), self.periods), 1, -1)
+                      if self._fits(self.anchor_u, self.anchor_point, u[n - 1], points[n - 1])),
+                     1)
+        first = points[:spans].copy()
+        first[:spans - 1] = self.anchor_point
+        self.anchor_u, self.anchor_point = float(u[spans - 1]), points[spans - 1]
+        self.at_rest = False
+        return first, u[spans:], points[spans:]
+
+    def _point_before_last(self, u: np.ndarray, points: np.ndarray, spans: int
+                           ) -> tuple[float, np.ndarray]:
+        """Where a last move spanning `spans` of the held points starts."""
+        if spans == len(u):
+            return self.anchor_u, self.anchor_point
+        return float(u[-1 - spans]), points[-1 - spans]
+
+    def _fits(self, u_a: float, point_a: np.ndarray, u_b: float, point_b: np.ndarray) -> bool:
+        """Whether the curve from u_a to u_b is within the chord tolerance of the chord from
+        point_a to point_b."""
+        arc = self.curve.point(np.linspace(u_a, u_b, REST_CHORD_SAMPLES))
+        chord = point_b - point_a
+        length2 = float(chord @ chord)
+        along = np.clip((arc - point_a) @ chord / length2, 0.0, 1.0) if length2 else 0.0
+        off = arc - point_a - np.multiply.outer(along, chord)
+        return bool(np.max(np.sqrt(np.einsum("ij,ij->i", off, off))) <= self.chord_mm)
 
 
 def write_trace_rows(out: BinaryIO, curve_index: int, chunk: PointChunk, period_s: float,
@@ -147,18 +269,25 @@ def convert_block(block: CurveBlock, index: int, out: BinaryIO, machine: Machine
             out.write(b"G90" + eol)
         writer = MoveWriter(out, machine.decimals, machine.feed_decimals, period_s, block.eol,
                             block.curve.points[0], block.units)
+    periods = rest_move_periods(machine)
+    rest = RestMoves(block.curve, plan.limits.chord_mm, periods) if periods > 1 else None
     s_mm = 0.0
     for chunk in Stepping(plan, method).chunks():
         try:
             guard.check(chunk.points)
         except CurveError as exc:
             raise exc.at(block.location) from None
-        if writer is not None and chunk.stretch is not None:  # not the first point: the start
-            writer.add_points(chunk.points)
+        if writer is not None:
+            if rest is not None:
+                writer.add_points(rest.take(chunk))
+            elif chunk.stretch is not None:  # not the first point: the start
+                writer.add_points(chunk.points)
         if trace is not None:
             s_mm = write_trace_rows(trace, index, chunk, period_s, s_mm, block.curve)
     moves = 0
     if writer is not None:
+        if rest is not None:
+            writer.add_points(rest.finish())
         writer.end_curve()
         moves = writer.moves
         if block.incremental:

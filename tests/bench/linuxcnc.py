@@ -2,6 +2,7 @@
 
     python -m tests.bench.linuxcnc                         # every sample, 1000 and 5000 mm/s²
     python -m tests.bench.linuxcnc butterfly.json --acc 1000 --output default,decimals=6
+    python -m tests.bench.linuxcnc quarter-circle.json --traj ARC_BLEND_RAMP_FREQ=1000
 
 Each sample is converted with an output variant: a built-in profile (the linuxcnc profile when
 the variant names none) and overrides of its keys. It is run end
@@ -12,7 +13,9 @@ time between the ends of the first and the second-to-last move over the planned 
 planned feed) and the largest distance of a recorded position from the exact curve
 (tests/linuxcnc/measure.py), and the servo periods in which the machine stood still mid-curve
 (its queue ran empty: LinuxCNC's task fills it in real time, and on a busy computer falls
-behind). Needs LinuxCNC (linuxcnc-uspace); as root, the user 'lcnc'.
+behind), and the rest-to-rest ratio (the whole curve, first and last move included, to a
+servo period). `--traj` adds INI [TRAJ] settings to the machine. Needs LinuxCNC
+(linuxcnc-uspace); as root, the user 'lcnc'.
 Measured here, never asserted in the test suite (a loaded machine can starve LinuxCNC's queue).
 """
 
@@ -58,13 +61,17 @@ def main() -> None:
     parser.add_argument("--output", action="append",
                         help="an output variant: a built-in profile and overrides of its "
                              "keys, e.g. default,decimals=6 (default: linuxcnc, and default)")
+    parser.add_argument("--traj", action="append", default=[],
+                        help="an INI [TRAJ] setting of the machine, KEY=VALUE, e.g. "
+                             "ARC_BLEND_RAMP_FREQ=1000 (default: sim.ini's)")
     args = parser.parse_args()
+    traj = dict(item.partition("=")[::2] for item in args.traj)
     if reason := unavailable_reason():
         sys.exit(f"cannot run LinuxCNC: {reason}")
     chosen = [s for s in samples() if not args.samples or s.name in args.samples]
     print("| sample | curve | output | acc mm/s² | planned s | measured / planned | path µm "
-          "| standstill periods |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+          "| standstill periods | rest to rest |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     with tempfile.TemporaryDirectory() as scratch:
         for output in args.output or DEFAULT_OUTPUTS:
             folder = Path(scratch) / output.replace(",", "_")
@@ -74,15 +81,16 @@ def main() -> None:
                 program = convert_for_linuxcnc(source, folder, overrides, profile)
                 for acc_mm_s2 in args.acc or ACCELERATIONS_MM_S2:
                     try:
-                        runs = measure(source, program, simulate(program, acc_mm_s2))
+                        runs = measure(source, program, simulate(program, acc_mm_s2, traj))
                     except (SimulationError, MeasurementError) as failure:
                         print(f"| {source.name} | | {output} | {acc_mm_s2:g} | | FAILED: "
-                              f"{failure} | | |", flush=True)
+                              f"{failure} | | | |", flush=True)
                         continue
                     for index, run in enumerate(runs):
                         print(f"| {source.name} | {index} | {output} | {acc_mm_s2:g} | "
                               f"{run.planned_s:.3f} | {run.cycle_ratio:.4f} | "
-                              f"{run.path_error_mm * 1000:.3f} | {run.standstill_periods} |",
+                              f"{run.path_error_mm * 1000:.3f} | {run.standstill_periods} | "
+                              f"{run.rest_to_rest_ratio:.4f} |",
                               flush=True)
 
 

@@ -8,6 +8,12 @@ time between two planned instants (the ends of the first and the second-to-last 
 crossing found between samples) divided by the planned time between them is the cycle ratio:
 1 means the machine followed the planned feed. The path error is the largest distance of a
 sample in that stretch from the exact curve (nurbsfeed's own projection, the one `check` uses).
+The first and the last move are left out of that ratio because the machine's departure and
+arrival are only known to a servo period; the rest-to-rest ratio takes them in (the machine's
+time from the last sample at the start to the first at the end over the planned cycle), to a
+servo period: it shows what a move from or into rest costs (README "Running on LinuxCNC"). It
+means that only where the machine stands at the curve start and end: LinuxCNC blends a tangent
+move before or after a curve into it, and a curve entered or left in motion shows less.
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ LEFT_MM = 0.1  # a sample this far from the polyline: the machine has left the c
 WALK_WINDOW = 64  # moves looked at ahead of the last sample's move
 PROJECTION_BACK_MM = 1e-3
 PROJECTION_ACCEPT_MM = 1e-4
+REST_TIME_S = 1e-9  # planned time from the start, and to the end, that counts as being there
 
 
 class MeasurementError(ValueError):
@@ -42,10 +49,16 @@ class CurveRun:
     # servo periods in that stretch without motion: LinuxCNC's queue ran empty (its task did
     # not keep up in real time) or a move ended in a full stop
     standstill_periods: int
+    planned_cycle_s: float  # the whole curve, rest to rest (the F words' sum)
+    rest_to_rest_s: float  # the machine's time from leaving the start to reaching the end
 
     @property
     def cycle_ratio(self) -> float:
         return self.measured_s / self.planned_s
+
+    @property
+    def rest_to_rest_ratio(self) -> float:
+        return self.rest_to_rest_s / self.planned_cycle_s
 
 
 def curve_blocks(source: Path) -> list[CurveBlock]:
@@ -90,10 +103,14 @@ def _measure_curve(block: CurveBlock, written: WrittenCurve, samples: np.ndarray
     _, distance = project_points(block.curve, inside_samples, PROJECTION_BACK_MM / scale,
                                  PROJECTION_ACCEPT_MM / scale, PROJECTION_BACK_MM / scale)
     standing = np.all(inside_samples[1:] == inside_samples[:-1], axis=1)
+    left = _departure(sample_times, sample_index, times[1])
+    reached = _crossing(sample_times, sample_index, times[-1] - REST_TIME_S)
     run = CurveRun(planned_s=planned_to - planned_from,
                    measured_s=(measured_to - measured_from) * SERVO_PERIOD_S,
                    path_error_mm=float(np.max(distance)) * scale,
-                   standstill_periods=int(np.count_nonzero(standing)))
+                   standstill_periods=int(np.count_nonzero(standing)),
+                   planned_cycle_s=float(times[-1]),
+                   rest_to_rest_s=float(reached - left) * SERVO_PERIOD_S)
     return run, int(sample_index[-1]) + 1
 
 
@@ -122,6 +139,18 @@ def _walk(samples: np.ndarray, first: int, vertices: np.ndarray, times: np.ndarr
         if k == len(moves) - 1 and fraction[nearest] >= 1.0:
             break
     return np.array(sample_times), np.array(sample_index)
+
+
+def _departure(sample_times: np.ndarray, sample_index: np.ndarray, first_end_s: float) -> float:
+    """The servo period at which the machine left the curve start: the last sample at the start
+    (planned time 0) before the end of the first move. Samples coming in to the start map to
+    small times on the first move too; a machine that did not stop there (it ran on from the
+    curve before) left where it first passed the start."""
+    before_first_end = int(np.argmax(sample_times >= first_end_s))
+    at_start = np.flatnonzero(sample_times[:before_first_end] <= REST_TIME_S)
+    if at_start.size == 0:
+        return _crossing(sample_times, sample_index, REST_TIME_S)
+    return float(sample_index[at_start[-1]])
 
 
 def _crossing(sample_times: np.ndarray, sample_index: np.ndarray, planned_s: float) -> float:

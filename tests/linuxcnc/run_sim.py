@@ -56,13 +56,17 @@ def unavailable_reason() -> str | None:
     return None
 
 
-def simulate(program: Path, acc_mm_s2: float) -> np.ndarray:
-    """Commanded positions (N, 3) in mm, one per servo period, from start-up to shutdown."""
+def simulate(program: Path, acc_mm_s2: float,
+             traj: dict[str, str] | None = None) -> np.ndarray:
+    """Commanded positions (N, 3) in mm, one per servo period, from start-up to shutdown.
+    traj: INI [TRAJ] settings added to the machine's (e.g. ARC_BLEND_RAMP_FREQ)."""
     folder = Path(tempfile.mkdtemp(prefix="nurbsfeed-sim-"))
     try:
         shutil.copytree(SIM, folder, dirs_exist_ok=True)
         ini = folder / "sim.ini"
-        ini.write_text(ACC_LINE.sub(lambda m: f"{m.group(1)}{acc_mm_s2:g}", ini.read_text()))
+        text = ACC_LINE.sub(lambda m: f"{m.group(1)}{acc_mm_s2:g}", ini.read_text())
+        added = "".join(f"{key} = {value}\n" for key, value in (traj or {}).items())
+        ini.write_text(text.replace("[TRAJ]\n", f"[TRAJ]\n{added}", 1))
         shutil.copyfile(program, folder / "program.ngc")
         command = ["linuxcnc", str(ini)]
         if os.geteuid() == 0:
