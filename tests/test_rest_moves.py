@@ -195,3 +195,31 @@ def test_merged_moves_reach_the_writer_as_one_move_each() -> None:
     lengths = np.linalg.norm(np.diff(np.vstack([curve.points[0], points]), axis=0), axis=1)
     durations = lengths / (feeds / 60.0)
     np.testing.assert_allclose(durations, [0.010] + [0.002] * 20 + [0.010], rtol=1e-4)
+
+
+def test_check_accepts_a_move_from_rest_only_as_long_as_the_jerk_allows(tmp_path) -> None:
+    # check's rule: a move of n <= ceil(rest_move_s / T) periods may be longer than a rounding
+    # merge only up to J_t (n T)^3 / 6 + 2 r, what any motion from (or into) rest covers
+    from nurbsfeed.analysis import check_files
+
+    machine = load_machine("linuxcnc")
+    target = tmp_path / "out.ngc"
+    convert_file(SAMPLES / "quarter-circle.json", target, machine)
+
+    def skipped(report) -> list[str]:
+        return [v.where for v in report.violations if v.check == "skipped-periods"]
+
+    source = SAMPLES / "quarter-circle.json"
+    assert skipped(check_files(source, target, machine)) == []
+    # the same moves judged without the key: the two rest moves are periods skipped
+    without = load_machine("linuxcnc", {"rest_move_s": 0.0})
+    assert len(skipped(check_files(source, target, without))) == 2
+    # a rest move stretched by a period beyond the jerk's reach is caught
+    lines = target.read_text().splitlines(keepends=True)
+    first = next(i for i, line in enumerate(lines) if line.startswith("G1 "))
+    words = dict((w[0], float(w[1:])) for w in lines[first].split()[1:])
+    longer = {k: v * 1.2 for k, v in words.items() if k in "XY"}
+    lines[first] = "G1 " + " ".join(f"{k}{v:.6f}" for k, v in longer.items()) + \
+        f" F{words['F'] * 1.2:.4f}\n"
+    target.write_text("".join(lines))
+    assert f"{target}:{first + 1}" in skipped(check_files(source, target, machine))

@@ -20,7 +20,7 @@ from nurbsfeed.analysis.check.report import Estimation, Findings
 from nurbsfeed.analysis.geometry import arc_length_mm, chord_errors_mm, curvature_1_mm
 from nurbsfeed.gcode.writer import round_ticks, written_decimals
 from nurbsfeed.geometry import NurbsCurve
-from nurbsfeed.machine import Machine
+from nurbsfeed.machine import FLOOR_MARGIN, Machine
 from nurbsfeed.planning.limits import Limits
 from nurbsfeed.program import MM_PER_UNIT, CurveBlock
 
@@ -71,7 +71,12 @@ from nurbsfeed.program import MM_PER_UNIT, CurveBlock
 #                    (a move that arrives early or late).
 #   skipped periods  n > 1 only where points rounded onto the previous one were dropped: two such
 #                    points are <= 2r apart and a step grows by at most A_t T^2 per period (its
-#                    second difference is a mean of a), so |dP^| <= 4r + A_t T^2.
+#                    second difference is a mean of a), so |dP^| <= 4r + A_t T^2; or, with the
+#                    profile's rest_move_s, a move from or into a rest of n <= its periods
+#                    (ceil(rest_move_s / T)): from rest under the jerk limit a <= J_t t, v <=
+#                    J_t t^2 / 2, s <= J_t t^3 / 6, so |dP^| <= J_t (n T)^3 / 6 + 2r (by time
+#                    symmetry into a rest too). A move that skips periods at speed covers v n T,
+#                    far more: it stays caught.
 #   period total     the moves' periods add up to the comment's point count - 1: more is a
 #                    violation, one fewer a note (the last point rounds onto the end point), more
 #                    than one fewer a violation (moves missing).
@@ -189,7 +194,11 @@ def check_section(section: Section, block: CurveBlock, machine: Machine,
         findings.add("zero-length", int(lines[still]), "move does not move (same point as the "
                      "one before, as written)")
 
-    t_s = _check_timing(section, block, lim, r, step_mm, feed_mm_min, lines, findings)
+    # the periods a move from or into a rest may span (profile key rest_move_s), as the
+    # pipeline counts them
+    rest_periods = max(1, math.ceil(machine.rest_move_s / period * (1.0 - FLOOR_MARGIN)))
+    t_s = _check_timing(section, block, lim, r, step_mm, feed_mm_min, lines, rest_periods,
+                        findings)
     point_lines = np.concatenate([[section.comment_line], lines])
 
     # ---- geometry: project every point, deviation, ends, chord error, coverage ----
@@ -226,7 +235,7 @@ def check_section(section: Section, block: CurveBlock, machine: Machine,
 
 def _check_timing(section: Section, block: CurveBlock, lim: Limits, r: float,
                   step_mm: np.ndarray, feed_mm_min: np.ndarray, lines: np.ndarray,
-                  findings: Findings) -> np.ndarray:
+                  rest_periods: int, findings: Findings) -> np.ndarray:
     """Segment times, multi-period moves, period total and cycle time; returns the time of every
     point (M+1,) on the period grid."""
     period = lim.period_s
@@ -239,8 +248,11 @@ def _check_timing(section: Section, block: CurveBlock, lim: Limits, r: float,
     findings.measure("segment-time", off_pct[usable], 100.0 * SEGMENT_TIME_REL_TOL, 0.0,
                      lines[usable])
     multi = n_periods > 1
-    findings.measure("skipped-periods", step_mm[multi], 4.0 * r + lim.acc_mm_s2 * period**2,
-                     0.0, lines[multi])
+    skipped_cap = np.full(n_periods.shape, 4.0 * r + lim.acc_mm_s2 * period**2)
+    at_rest = n_periods <= rest_periods
+    skipped_cap[at_rest] = np.maximum(
+        skipped_cap[at_rest], lim.jerk_mm_s3 * (n_periods[at_rest] * period) ** 3 / 6.0 + 2.0 * r)
+    findings.measure("skipped-periods", step_mm[multi], skipped_cap[multi], 0.0, lines[multi])
     total = int(n_periods.sum())
     announced = section.n_points - 1
     if total > announced:
