@@ -10,7 +10,10 @@ Building it, in order (`_grid_nodes`, one compiled call; then `simpson_lengths`)
 2. Curvature maxima: local maxima of kappa on the samples that stand out from their valleys,
    each refined inside the bracket of its two neighbours (sampling, then Brent's method span by
    span, with kappa from both sides at a knot; only roughly where kappa stays well below
-   kappa_floor, where the limit is flat).
+   kappa_floor, where the limit is flat). A maximum inside the last interval before a knot or
+   an end, beside which the samples keep rising (an end, or a knot where kappa jumps down),
+   is no local maximum of the samples: each side of each boundary is probed for it
+   (`_boundary_maxima`).
 3. Stops, where the feed must come to rest (kappa is infinite there):
    a. corners at knots of multiplicity >= degree, where the unit tangent jumps (`_corners`);
    b. zeros of C' (a control point repeated, a cusp, a path that turns back on itself), found
@@ -56,6 +59,9 @@ ZOOM_SAMPLES = 11  # the bracket (two grid steps) shrinks by 5 by sampling ...
 PEAK_BRACKET_REL = 1e-8
 BRENT_ITERATIONS = 100
 KNOT_PROBE_REL = 1e-6  # of the bracket: where kappa's slope beside a knot is probed
+# kappa at that probe above its value at the knot by more than this (relative) falls into the
+# knot; less is rounding (a circular arc's kappa is constant to ~1e-15)
+BOUNDARY_FALL_REL = 1e-10
 GOLDEN_SMALL = (3.0 - math.sqrt(5.0)) / 2.0  # the golden section's smaller part, 0.382
 EPS_U = 3e-16  # Brent's relative resolution in u (a little above the double's)
 # Simpson's tolerance per node interval, relative to the interval's length at the mean |C'|.
@@ -711,6 +717,77 @@ def _unit_tangent(c, pts, tan, q):
 
 
 @jit
+def _boundary_maxima(knots, coef, degree, breaks, u, peak_u, stop_u):
+    """Step 2d: curvature maxima inside a sample interval that ends at a span boundary (a knot
+    or an end of the curve), which no sample shows as a local maximum (P,).
+
+    Step 2 brackets a maximum by the samples beside a local maximum of the samples; a maximum
+    strictly inside the last interval before a boundary escapes it when kappa keeps rising on
+    the samples past it: at an end (no sample beyond), or at a knot where kappa jumps down and
+    the knot's sample takes the higher side. Found by fuzzing: kappa 37 between an end (20)
+    and the node before it (18); 21.7 between a knot (16.8, 7.5 beyond) and the node before
+    it (16.4).
+    The grid's refinement (step 4) splits on differences of kappa at the ends of an interval
+    and cannot see such a bump, and the planner's eroded limit assumes none: the speed there
+    was 20 % above the limit. Per side of each boundary, from that span's polynomial: where
+    kappa falls into the boundary (a probe just inside is higher, beyond rounding) and that
+    probe is above the sample beside it, the interval holds a maximum: sampled, then Brent's
+    method. It counts where it stands out from both ends of the interval, as in
+    `_prominent_maxima`. An interval that holds a peak of step 2 (sorted peak_u: a knot inside
+    its bracket is searched from both sides) or a stop (sorted stop_u) is skipped."""
+    n_ctrl = coef.shape[0]
+    found = np.empty(2 * breaks.size)
+    n = 0
+    last = ZOOM_SAMPLES - 1
+    for b in range(breaks.size):
+        at = np.searchsorted(u, breaks[b])  # the samples hold every break exactly
+        for side in (-1, 1):
+            beside = at + side
+            if beside < 0 or beside >= u.size:
+                continue
+            low, high = min(u[at], u[beside]), max(u[at], u[beside])
+            if _holds_any(peak_u, low, high) or _holds_any(stop_u, low, high):
+                continue
+            span = find_span(knots, degree, n_ctrl, 0.5 * (low + high), degree)
+            k_end = _kappa_on_span(knots, coef, degree, span, u[at])
+            if k_end < 0.0:
+                continue  # C' = 0 there: a stop or an end at rest, handled by step 3
+            probe_u = u[at] + side * KNOT_PROBE_REL * (high - low)
+            k_probe = _kappa_on_span(knots, coef, degree, span, probe_u)
+            if k_probe <= k_end * (1.0 + BOUNDARY_FALL_REL):
+                continue
+            k_beside = _kappa_on_span(knots, coef, degree, span, u[beside])
+            if k_probe <= k_beside:
+                continue
+            # the interval's points in order: its ends, ZOOM_SAMPLES - 2 inside, and the probe
+            pts_u = np.empty(ZOOM_SAMPLES + 1)
+            pts_k = np.empty(ZOOM_SAMPLES + 1)
+            for i in range(ZOOM_SAMPLES):
+                pts_u[i] = low + (high - low) * (i / last) if i < last else high
+            pts_u[ZOOM_SAMPLES] = probe_u
+            pts_u.sort()
+            best = 1
+            for i in range(pts_u.size):
+                if pts_u[i] == probe_u:
+                    pts_k[i] = k_probe
+                elif pts_u[i] == u[at]:
+                    pts_k[i] = k_end
+                elif pts_u[i] == u[beside]:
+                    pts_k[i] = k_beside
+                else:
+                    pts_k[i] = _kappa_on_span(knots, coef, degree, span, pts_u[i])
+                if 0 < i < pts_u.size - 1 and pts_k[i] > pts_k[best]:
+                    best = i
+            top_u, top_k = _brent_max(knots, coef, degree, span, pts_u[best - 1],
+                                      pts_u[best + 1], pts_u[best], pts_k[best],
+                                      PEAK_BRACKET_REL * (high - low))
+            if top_k > max(k_end, k_beside) * (1.0 + PEAK_PROMINENCE_REL):
+                found[n] = top_u
+                n += 1
+    return found[:n]
+
+
+@jit
 def _holds_any(sorted_u, low, high):
     """Whether sorted_u (K,) has a value in [low, high]."""
     q = np.searchsorted(sorted_u, low)
@@ -750,6 +827,9 @@ def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, f
         keep[k] = not _holds_any(stop_u, u[idx[k] - 1], u[idx[k] + 1])
     peak_u = peak_u[keep]
     peak_u = np.sort(peak_u)
+    beside_u = _boundary_maxima(knots, coef, degree, breaks, u, peak_u, stop_u)
+    if beside_u.size:
+        peak_u = np.sort(np.concatenate((peak_u, beside_u)))
     extra = np.concatenate((peak_u, stop_u, extra_u))
     u, kappa, speed, pts, tan = _merge(knots, coef, degree, u, kappa, speed, pts, tan, extra,
                                        zero_speed)
