@@ -48,7 +48,7 @@ def paper_limits() -> Limits:
     return load_machine("paper-table1").limits
 
 
-PROFILES = ("default", "paper-table1")
+PROFILES = ("default", "paper-table1", "linuxcnc")
 
 
 def convert_each(sources: list[Path], folder: Path) -> dict[tuple[str, str], Path]:

@@ -140,7 +140,7 @@ def test_a_real_violation_beside_a_turn_back_is_still_caught(tmp_path: Path, bro
     convert_file(source, target, machine)
     lines = target.read_text().splitlines(keepends=True)
     tip = _first_turn_back(lines)
-    assert " F0.6" in lines[tip]  # the planner rests there
+    assert float(lines[tip].rsplit("F", 1)[1]) < 1.0  # the planner (nearly) rests there
     if broken == "lifted":
         assert "Z" not in lines[tip]
         lines[tip] = lines[tip].replace(" F", " Z0.00169 F")  # the point before is at Z0.00069

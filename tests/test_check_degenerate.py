@@ -35,7 +35,7 @@ def converted(tmp_path_factory: pytest.TempPathFactory) -> dict[tuple[str, str],
     return convert_each(sorted(DEGENERATE.glob("*.json")), tmp_path_factory.mktemp("degenerate"))
 
 
-@pytest.mark.parametrize("profile", ["default", "paper-table1"])
+@pytest.mark.parametrize("profile", ["default", "paper-table1", "linuxcnc"])
 @pytest.mark.parametrize("source", sorted(p.name for p in DEGENERATE.glob("*.json")))
 def test_every_degenerate_file_converted_passes(converted, source: str, profile: str) -> None:
     report = check_files(DEGENERATE / source, converted[(source, profile)], load_machine(profile))

@@ -87,10 +87,13 @@ def samples_converted(tmp_path_factory: pytest.TempPathFactory) -> dict[tuple[st
     return convert_each(sorted(SAMPLES.iterdir()), tmp_path_factory.mktemp("samples"))
 
 
-@pytest.mark.parametrize("profile", ["default", "paper-table1"])
+@pytest.mark.parametrize("profile", ["default", "paper-table1", "linuxcnc"])
 @pytest.mark.parametrize("sample", sorted(p.name for p in SAMPLES.iterdir()))
 def test_every_sample_converted_today_passes(samples_converted, sample: str,
                                              profile: str) -> None:
+    """(Under linuxcnc, circle, quarter-circle and fanuc-multi-curve once ran v^2 kappa up to
+    9 % over max_normal_acc_mm_s2: a segment's peak lay between two grid nodes, where no check
+    looked; planning now puts a node there.)"""
     report = check_files(SAMPLES / sample, samples_converted[(sample, profile)],
                          load_machine(profile))
     assert report.ok, "\n".join(map(str, report.violations))

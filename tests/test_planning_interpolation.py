@@ -246,9 +246,10 @@ def test_a_stretch_without_a_cruise_lands_by_sigma_alone(paper_limits) -> None:
 
 
 def test_the_uniform_slowdown_keeps_the_limits_the_fix_rounds_left() -> None:
-    """The last resort of planning step 5: on this random curve (one in ~2000) the fix rounds
-    leave nodes above the limit, and the whole law is slowed by their largest v / limit."""
-    rng = np.random.default_rng(2720)
+    """The last resort of planning step 5: on this random curve the fix rounds leave nodes above
+    the limit, and the whole law is slowed by their largest v / limit. (Seed 2720 was one, until
+    planning learned to add a grid node where a segment's peak hid between two.)"""
+    rng = np.random.default_rng(52835)
     curve = random_curve(rng)
     lim = random_limits(rng)
     plan = plan_curve(curve, lim)

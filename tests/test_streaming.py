@@ -202,10 +202,10 @@ def test_an_absurd_duration_never_wraps_to_a_small_period_count(duration_s: floa
     across the curve at F1.7e6). Such a stretch gets -1, which the planner refuses."""
     v_key = np.array([0.0, 0.0])
     residual, _, periods, _ = _whole_periods(v_key, np.array([0.0, duration_s]),
-                                             np.array([0, 2]), np.ones(3), np.zeros(3), 0.001)
+                                             np.array([0, 2]), np.ones(3), np.zeros(3), 0.001, 1.0)
     assert residual == 1.0 and periods.tolist() == [-1]
     _, _, periods, _ = _whole_periods(v_key, np.array([0.0, MAX_STRETCH_PERIODS * 0.001]),
-                                      np.array([0, 2]), np.ones(3), np.zeros(3), 0.001)
+                                      np.array([0, 2]), np.ones(3), np.zeros(3), 0.001, 1.0)
     assert 0.99 * MAX_STRETCH_PERIODS < periods[0] <= MAX_STRETCH_PERIODS  # the longest allowed
 
 

@@ -35,7 +35,7 @@ from functools import cached_property
 import numpy as np
 
 from nurbsfeed.errors import CurveError
-from nurbsfeed.geometry.nurbs import NurbsCurve
+from nurbsfeed.geometry.nurbs import NurbsCurve, curvature_from_derivatives
 from nurbsfeed.jit import jit
 from nurbsfeed.planning.grid import Grid, build_grid, polygon_length
 from nurbsfeed.planning.limits import Limits, curvature_threshold, speed_limit
@@ -50,6 +50,7 @@ PERIOD_ROUNDING_REL = 1e-9  # a duration within this of a whole period count is 
 MAX_STRETCH_PERIODS = 1e15  # whole periods of one stretch: far below int64's range
 HOLD_ROOM = 0.05  # holds leave at least this fraction of a segment for its transitions
 
+PEAK_NODE_ROUNDS = 3  # times the grid gains nodes where a segment's peak hid between two
 SHOULDER_ROUNDS = 4  # times key points are added where a hold cannot (or should not) help
 HOLD_MAX_PERIODS = 16  # a hold longer than this (in time) becomes a shoulder key point
 KIND_END, KIND_PEAK, KIND_CORNER, KIND_FEED, KIND_HOLD, KIND_CUSP, KIND_SHOULDER = range(7)
@@ -195,13 +196,12 @@ def _key_points(kappa, raw_limit, fcap, stop_index, stop_cos, peak_index, feed_n
 
 
 @jit
-def _whole_periods(v_key, key_t, key_node, limit, v_nodes, period_s):
+def _whole_periods(v_key, key_t, key_node, limit, v_nodes, period_s, slowdown):
     """Step 6: the uniform slowdown (whatever the key points could not fix: the largest v / limit
-    over the nodes that are not keys, at least 1), the keys where the motion rests (P+1,), and
-    per stretch between them (P,) its whole number of periods and its lambda. A stretch that
-    would last more than MAX_STRETCH_PERIODS periods, or not a finite number, gets -1 (the
-    caller refuses the curve): rounded into int64 it could wrap to a small count."""
-    slowdown = 1.0
+    over the nodes that are not keys, at least the slowdown given), the keys where the motion
+    rests (P+1,), and per stretch between them (P,) its whole number of periods and its lambda.
+    A stretch that would last more than MAX_STRETCH_PERIODS periods, or not a finite number,
+    gets -1 (the caller refuses the curve): rounded into int64 it could wrap to a small count."""
     is_key = np.zeros(limit.size, dtype=np.bool_)
     is_key[key_node] = True
     for n in range(limit.size):
@@ -244,7 +244,9 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
     key point (a shoulder; -1: none): the node where the law was too fast farthest from the
     key it leaves (nearest to the key it comes to), when that key is at rest (a hold of speed 0
     cannot help, so the segment's cap was lowered) or when the hold would last longer than
-    max_hold_s (a key speed held over a long stretch of a steep limit: a near cusp).
+    max_hold_s (a key speed held over a long stretch of a steep limit: a near cusp); and, per
+    segment, the stretch [from, to] of arc length where its peak speed hides between two nodes
+    ((K-1, 2); NaN: none).
     """
     key_s = s_mm[key_node]
     length = key_s[1:] - key_s[:-1]
@@ -345,12 +347,89 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
         rounds += 1
         if not changed:
             break
-    return v, peak, t0, s0, v0, a0, jk, key_t, duration, v_nodes, rounds, shoulder_at
+    hidden_peak_s = np.full((n_seg, 2), np.nan)
+    for seg in range(n_seg):
+        if _hidden_peak(seg, s_mm, limit, key_node, key_s, v, peak, hold_start, hold_end, d_up,
+                        d_down):
+            accel_end = key_s[seg] + hold_start[seg] + d_up[seg]
+            hidden_peak_s[seg, 0] = accel_end
+            hidden_peak_s[seg, 1] = max(key_s[seg + 1] - hold_end[seg] - d_down[seg], accel_end)
+    return (v, peak, t0, s0, v0, a0, jk, key_t, duration, v_nodes, rounds, shoulder_at,
+            hidden_peak_s)
+
+
+@jit
+def _hidden_peak(seg, s_mm, limit, key_node, key_s, v, peak, hold_start, hold_end, d_up, d_down):
+    """Whether segment seg's peak speed, held over [accel_end, decel_start], hides between two
+    nodes and may break the limit there.
+
+    Between two adjacent nodes the limit is at least the lower of theirs (every curvature
+    maximum is a node), and away from its peak the law's speed is monotone between nodes; so
+    only a peak above that lower limit, with no node inside its cruise, can break the limit
+    where no node looks (a circle's shoulders one grid interval apart ran 5 % over
+    sqrt(A_n / kappa))."""
+    if not peak[seg] > max(v[seg], v[seg + 1]) * (1.0 + SPEED_CHECK_REL_TOL):
+        return False
+    accel_end = key_s[seg] + hold_start[seg] + d_up[seg]
+    decel_start = max(key_s[seg + 1] - hold_end[seg] - d_down[seg], accel_end)
+    after = np.searchsorted(s_mm, accel_end, side="left")  # the first node at or after it
+    if after < s_mm.size and s_mm[after] <= decel_start:
+        return False  # a node in the cruise: checked
+    if after <= key_node[seg] or after > key_node[seg + 1]:
+        return False
+    return peak[seg] > min(limit[after - 1], limit[after]) * (1.0 + SPEED_CHECK_REL_TOL)
 
 
 def _too_long(cycle_s: float, max_curve_time_s: float) -> str:
     return (f"planned cycle {cycle_s:.6g} s exceeds max_curve_time_s = {max_curve_time_s:g} s "
             "(raise it in the profile or with --max-curve-time-s)")
+
+
+def _plan_on_grid(grid: Grid, raw_limit, fcap, feed_nodes, kappa0: float, lim: Limits):
+    """Steps 2-5 on one grid, with shoulder key points added where holds cannot help.
+
+    Beside a rest where the limit rises steeply (a curve that starts with a hook, a weight near
+    0 beside an end) the S-curve from rest outruns the limit and no hold can help; the segment's
+    cap would fall to that limit all along it. A key point at the last such node (a shoulder)
+    confines the low cap to the short segment from the rest to it. Likewise beside a near cusp,
+    where holding its tiny key speed up to the limit's rise would crawl for seconds: from a
+    shoulder the speed rises with the limit."""
+    shoulders = np.empty(0, dtype=np.int64)
+    for _ in range(SHOULDER_ROUNDS + 1):
+        limit, key_node, key_kind, nominal, cap, n_peaks = _key_points(
+            grid.kappa_1_mm, raw_limit, fcap, grid.stop_index, grid.stop_cos, grid.peak_index,
+            feed_nodes, kappa0, lim.feed_mm_s, shoulders)
+        hold_start = np.zeros(len(key_node) - 1)
+        hold_end = np.zeros(len(key_node) - 1)
+        v, peak, *pieces, key_t, duration, v_nodes, rounds, shoulder_at, hidden_peak_s = \
+            _limit_rounds(grid.s_mm, limit, key_node, nominal, cap, hold_start, hold_end,
+                          lim.acc_mm_s2, lim.jerk_mm_s3, HOLD_MAX_PERIODS * lim.period_s)
+        if not (shoulder_at >= 0).any():  # (the common case: setdiff1d costs ~50 us)
+            break
+        new = np.setdiff1d(shoulder_at[shoulder_at >= 0], key_node)
+        if new.size == 0 or shoulders.size >= SHOULDER_ROUNDS * max(1, key_node.size):
+            break
+        shoulders = np.union1d(shoulders, new)
+    return (limit, key_node, key_kind, nominal, n_peaks, v, peak, hold_start, hold_end, pieces,
+            key_t, duration, v_nodes, rounds, hidden_peak_s)
+
+
+def _hidden_slowdown(curve: NurbsCurve, grid: Grid, lim: Limits, feed_u, feed_mm_s, peak,
+                     hidden_peak_s) -> float:
+    """The slowdown that keeps peaks still hidden between nodes after PEAK_NODE_ROUNDS within
+    the limit (at least 1): between two nodes the limit has no minimum inside (curvature maxima
+    are nodes), so over a peak's stretch it is lowest at one of the stretch's ends, evaluated
+    here on the curve itself."""
+    hidden = np.flatnonzero(np.isfinite(hidden_peak_s[:, 0]))
+    if hidden.size == 0:
+        return 1.0
+    u = np.interp(hidden_peak_s[hidden].ravel(), grid.s_mm, grid.u)
+    _, c1, c2 = curve.derivatives(u)
+    kappa = np.nan_to_num(curvature_from_derivatives(c1, c2), nan=np.inf)
+    here = speed_limit(kappa, lim, feed_at(u, feed_u, feed_mm_s)).reshape(-1, 2).min(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(here > 0.0, peak[hidden] / here, 1.0)
+    return max(1.0, float(ratio.max()))
 
 
 def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
@@ -364,38 +443,38 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
     spacing = max(GRID_STEPS * lim.feed_mm_s * lim.period_s, rough_length / MAX_GRID_NODES)
     feed_breaks = feed_u[1:] if feed_u.size else feed_u
     kappa0 = curvature_threshold(lim)
-    grid = build_grid(curve, spacing, feed_breaks, kappa0)
-    fcap = feed_at(grid.u, feed_u, feed_mm_s)
-    feed_nodes = np.searchsorted(grid.u, feed_breaks)
-    raw_limit = speed_limit(grid.kappa_1_mm, lim, fcap)
-    shoulders = np.empty(0, dtype=np.int64)
-    # Beside a rest where the limit rises steeply (a curve that starts with a hook, a weight
-    # near 0 beside an end) the S-curve from rest outruns the limit and no hold can help; the
-    # segment's cap would fall to that limit all along it. A key point at the last such node
-    # (a shoulder) confines the low cap to the short segment from the rest to it. Likewise
-    # beside a near cusp, where holding its tiny key speed up to the limit's rise would crawl
-    # for seconds: from a shoulder the speed rises with the limit.
-    for _ in range(SHOULDER_ROUNDS + 1):
-        limit, key_node, key_kind, nominal, cap, n_peaks = _key_points(
-            grid.kappa_1_mm, raw_limit, fcap, grid.stop_index, grid.stop_cos, grid.peak_index,
-            feed_nodes, kappa0, lim.feed_mm_s, shoulders)
-        hold_start = np.zeros(len(key_node) - 1)
-        hold_end = np.zeros(len(key_node) - 1)
-        v, peak, *pieces, key_t, duration, v_nodes, rounds, shoulder_at = _limit_rounds(
-            grid.s_mm, limit, key_node, nominal, cap, hold_start, hold_end, lim.acc_mm_s2,
-            lim.jerk_mm_s3, HOLD_MAX_PERIODS * lim.period_s)
-        if not (shoulder_at >= 0).any():  # (the common case: setdiff1d costs ~50 us)
+    extra_u = feed_breaks
+    for refine in range(PEAK_NODE_ROUNDS + 1):
+        grid = build_grid(curve, spacing, extra_u, kappa0)
+        fcap = feed_at(grid.u, feed_u, feed_mm_s)
+        feed_nodes = np.searchsorted(grid.u, feed_breaks)
+        raw_limit = speed_limit(grid.kappa_1_mm, lim, fcap)
+        (limit, key_node, key_kind, nominal, n_peaks, v, peak, hold_start, hold_end, pieces,
+         key_t, duration, v_nodes, rounds, hidden_peak_s) = _plan_on_grid(
+            grid, raw_limit, fcap, feed_nodes, kappa0, lim)
+        hidden = np.flatnonzero(np.isfinite(hidden_peak_s[:, 0]))
+        if hidden.size == 0 or refine == PEAK_NODE_ROUNDS:
             break
-        new = np.setdiff1d(shoulder_at[shoulder_at >= 0], key_node)
-        if new.size == 0 or shoulders.size >= SHOULDER_ROUNDS * max(1, key_node.size):
+        # a segment whose peak hid between two nodes (grid spacing follows the feed, not the
+        # plan): plan again with a node in the middle of each of its intervals (one node where
+        # the peak was only moves it: the holds the next rounds set shift it again) that is
+        # longer than GRID_STEPS steps at that peak (the eroded limit covers shorter ones)
+        mids = []
+        for seg in hidden:
+            first, last = key_node[seg], key_node[seg + 1]
+            wide = np.diff(grid.s_mm[first:last + 1]) > GRID_STEPS * peak[seg] * lim.period_s
+            mids.append(0.5 * (grid.u[first:last] + grid.u[first + 1:last + 1])[wide])
+        more = np.concatenate(mids)
+        if more.size == 0:
             break
-        shoulders = np.union1d(shoulders, new)
+        extra_u = np.union1d(extra_u, more)
     t0, s0, v0, a0, jk = pieces
     law = TimeLaw.from_pieces(t0, s0, v0, a0, jk, key_t, duration)
     if not law.duration_s <= max_curve_time_s:
         raise CurveError(_too_long(law.duration_s, max_curve_time_s))
     slowdown, piece_key, piece_periods, piece_scale = _whole_periods(
-        v, law.key_t_s, key_node, limit, v_nodes, lim.period_s)
+        v, law.key_t_s, key_node, limit, v_nodes, lim.period_s,
+        _hidden_slowdown(curve, grid, lim, feed_u, feed_mm_s, peak, hidden_peak_s))
     if np.any(piece_periods < 0):
         raise CurveError(_too_long(law.duration_s * slowdown, max_curve_time_s))
     cycle_s = float(piece_periods.sum()) * lim.period_s
