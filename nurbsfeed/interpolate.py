@@ -79,6 +79,110 @@ KNOT_CHORD_REL = 1e-9
 EPS = float(np.finfo(float).eps)
 
 
+# Gauss-Legendre, 5 points on [-1, 1]: the arc of a piece of the curve (`_arc`)
+GAUSS_X = (-0.906179845938664, -0.5384693101056831, 0.0, 0.5384693101056831, 0.906179845938664)
+GAUSS_W = (0.23692688505618928, 0.4786286704993663, 0.5688888888888887, 0.4786286704993663,
+           0.23692688505618928)
+ARC_REL_TOL = 1e-12  # of the target: what `_arc_step` resolves the arc of a step to
+ARC_MAX_DEPTH = 48  # halvings of a piece by `_arc`: far below any step's rounding
+
+
+@jit
+def _gauss_arc(knots, coef, degree, n_ctrl, a, b, span):
+    """Integral of |C'| over [a, b] by 5-point Gauss-Legendre, and the span last used."""
+    half = 0.5 * (b - a)
+    mid = 0.5 * (a + b)
+    total = 0.0
+    for i in range(5):
+        x = mid + half * GAUSS_X[i]
+        span = find_span(knots, degree, n_ctrl, x, span)
+        _, _, _, dx, dy, dz = point_d1(knots, coef, degree, span, x)
+        total += GAUSS_W[i] * math.sqrt(dx * dx + dy * dy + dz * dz)
+    return half * total, span
+
+
+@jit
+def _arc(knots, coef, degree, n_ctrl, a, b, tol, span):
+    """The arc length of C over [a, b] (a <= b) to about tol, by adaptive Gauss-Legendre: a
+    piece is halved until its halves add up to it within its share of tol. |C'| has a kink
+    where C' = 0 and a narrow dip where it nearly vanishes, which a fixed rule misses."""
+    stack_a = np.empty(ARC_MAX_DEPTH + 2)
+    stack_b = np.empty(ARC_MAX_DEPTH + 2)
+    stack_q = np.empty(ARC_MAX_DEPTH + 2)
+    whole, span = _gauss_arc(knots, coef, degree, n_ctrl, a, b, span)
+    stack_a[0] = a
+    stack_b[0] = b
+    stack_q[0] = whole
+    top = 1
+    total = 0.0
+    width = b - a
+    while top > 0:
+        top -= 1
+        lo = stack_a[top]
+        hi = stack_b[top]
+        q = stack_q[top]
+        mid = 0.5 * (lo + hi)
+        left, span = _gauss_arc(knots, coef, degree, n_ctrl, lo, mid, span)
+        right, span = _gauss_arc(knots, coef, degree, n_ctrl, mid, hi, span)
+        if (abs(left + right - q) <= tol * (hi - lo) / width or top >= ARC_MAX_DEPTH
+                or mid <= lo or mid >= hi):
+            total += left + right
+            continue
+        # the right half first on the stack's top: the pieces are summed from a to b
+        stack_a[top] = mid
+        stack_b[top] = hi
+        stack_q[top] = right
+        stack_a[top + 1] = lo
+        stack_b[top + 1] = mid
+        stack_q[top + 1] = left
+        top += 2
+    return total
+
+
+@jit
+def _arc_step(knots, coef, degree, n_ctrl, u, ds, guess, span):
+    """The du > 0 whose arc from u is ds (integral of |C'| over [u, u + du]), by bracketing and
+    Illinois regula falsi; the arc to each new candidate is added to the arc to the bracket's
+    low end, so that the pieces integrated shrink with the bracket."""
+    tol = ARC_REL_TOL * ds
+    lo = 0.0
+    arc_lo = 0.0
+    hi = guess
+    arc_hi = _arc(knots, coef, degree, n_ctrl, u, u + hi, tol, span)
+    for _ in range(CHORD_ITERATIONS):
+        if arc_hi >= ds:
+            break
+        lo = hi
+        arc_lo = arc_hi
+        hi *= 2.0
+        arc_hi = arc_lo + _arc(knots, coef, degree, n_ctrl, u + lo, u + hi, tol, span)
+    g_lo = arc_lo - ds
+    g_hi = arc_hi - ds
+    side = 0
+    for _ in range(CHORD_ITERATIONS):
+        if hi - lo <= 1e-16 * (abs(u) + hi) or g_hi == g_lo or -g_lo <= tol or g_hi <= tol:
+            break
+        x = (lo * g_hi - hi * g_lo) / (g_hi - g_lo)
+        if x <= lo or x >= hi:
+            x = 0.5 * (lo + hi)
+        arc_x = arc_lo + _arc(knots, coef, degree, n_ctrl, u + lo, u + x, tol, span)
+        g = arc_x - ds
+        if g < 0.0:
+            lo = x
+            arc_lo = arc_x
+            g_lo = g
+            if side == -1:
+                g_hi *= 0.5
+            side = -1
+        else:
+            hi = x
+            g_hi = g
+            if side == 1:
+                g_lo *= 0.5
+            side = 1
+    return lo if -g_lo < g_hi else hi
+
+
 @jit
 def _chord_step(knots, coef, degree, n_ctrl, u, px, py, pz, ds, guess, span):
     """The du > 0 with |C(u + du) - P| = ds, by bracketing and Illinois regula falsi."""
@@ -206,9 +310,14 @@ def step_spans(method, knots, coef, degree, n_spans, u0, ds, sigma, slow_speed, 
                             continue
                     u = ut
                     continue
+        # Beside a point where C' (nearly) vanishes the curve can turn back within one step:
+        # the chord there is far shorter than the arc, and the chord equation has roots on
+        # both legs of the turn, so a chord step can land on the far leg (up to 0.07 um ahead
+        # of the law in one period, a 2x jerk from positions, and a landing residual that
+        # jumps with sigma). The law is in arc length: step the arc itself there.
         guess = h / slow_speed if speed < slow_speed else h / speed
         guess = min(guess, u_range)
-        u = u + _chord_step(knots, coef, degree, n_ctrl, u, px, py, pz, h, guess, span)
+        u = u + _arc_step(knots, coef, degree, n_ctrl, u, h, guess, span)
 
 
 @jit
