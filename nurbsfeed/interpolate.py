@@ -9,9 +9,12 @@ All three methods consume the same targets ds_k = s(t_{k+1}) - s(t_k), t_k = k T
            c2 = 2 C'(u~).(C(u~) - C(u)), c3 = |C(u~) - C(u)|^2 - ds^2. The root near zero,
            (-c2 + sqrt(disc)) / (2 c1), is computed as -2 c3 / (c2 + sqrt(disc)) (same root, no
            cancellation); du = 0 when disc < 0 (the paper's rule).
-Where |C'(u)| vanishes (repeated control points, design §3a) a step solves the chord equation
-|C(u + du) - C(u)| = ds directly instead of dividing by |C'|; rk2c and rk4 also do so when |C'|
-changes by more than a quarter within the step, which only happens right next to such a point.
+Where |C'(u)| vanishes (repeated control points, design §3a) a step solves its arc length
+integral(|C'|, u, u + du) = ds directly (`_arc_step`, adaptive Gauss-Legendre) instead of dividing
+by |C'|; rk2c and rk4 also do so when |C'| changes by more than a quarter within the step, which
+only happens right next to such a point. Not the chord: there the curve can turn back within
+one step, the chord is far shorter than the arc and |C(u + du) - C(u)| = ds has roots on both
+legs of the turn; a chord step landed on the far leg, ahead of the law by more than its target.
 
 End landing: rk2c makes every chord equal to its target, so its arc position runs ahead of the
 time law (by the arc minus the chord of every step, ~1 um over a curve) and the last step would
@@ -31,7 +34,10 @@ end, equals its own target:
    search over full runs (d residual / d sigma ~ -length), never above 1.
 Both searches stop when the last chord matches its target to LANDING_REL_TOL, or to the rounding
 floor of the stepping where that is coarser (but at most LANDING_REL_MAX), or where rounding
-stops them improving (then the best run stands).
+stops them improving (then the best run stands). A run whose point n - 1 lies on or past the end
+is never kept (the machine would pass the end and come back, or u would step back at a rest):
+it ranks below every run before the end, and should the searches end on one, sigma is lowered
+until the point lies before the end (an internal error if it never does).
 Where the plan rests inside the curve (a corner), each stretch between rests is stepped and
 landed on its own, so a point falls exactly on the corner.
 
@@ -654,6 +660,7 @@ class _Stretch:
         self.u = np.empty(size)
         self.pts = np.empty((size, 3))
         self.u_bump = self.u_start  # u at the bump's first point, from the last full run
+        self.past_end = False  # whether the last run's point n - 1 lies on or past the end
         # one pass over the targets: their sum, the last one, rk2c's drift (and, if resident,
         # the targets themselves)
         node, drift, total, carry = 0, 0.0, 0.0, 0.0
@@ -713,6 +720,9 @@ class _Stretch:
             if hi == last:
                 break
             k = hi
+        # a point on or past the end would make the machine go past it and back (or, at a rest
+        # inside the curve, step u back for the next stretch): the landing never keeps such a run
+        self.past_end = u >= self.u_end
         last_point = self.pts[base + m]  # the run's last stepped point (n - 1)
         gap = math.sqrt(sum((float(self.end_point[i]) - float(last_point[i])) ** 2
                             for i in range(3)))
@@ -737,7 +747,7 @@ class _Stretch:
         r = self.run(sigma)
         runs = 1.0
         if abs(r) > tol and r < 0.0 and self.bump is not None:
-            landed = self._land_bump(self.bump, sigma, r, tol)
+            landed = self._land_bump(self.bump, sigma, r, self.past_end, tol)
             if landed is not None:
                 slowdown, bump_runs = landed
                 return _Landing(sigma, self.bump, slowdown, runs + bump_runs)
@@ -747,60 +757,77 @@ class _Stretch:
         # raise the speed). A resident stretch keeps the best run after the first aside, so
         # that a last run that made things worse (rounding) costs a copy back.
         sigma_prev, r_prev = sigma, r
-        best = (abs(r), sigma)
+        best = (self.past_end, abs(r), sigma)  # a run past the end ranks below any other
         kept = None
         sigma = min(sigma + r / total, 1.0)
-        while abs(r_prev) > tol:
+        while abs(r_prev) > tol or best[0]:
             r = self.run(sigma)
             runs += 1.0
-            improved = abs(r) < best[0]
+            improved = (self.past_end, abs(r)) < best[:2]
             if improved:
-                best = (abs(r), sigma)
+                best = (self.past_end, abs(r), sigma)
             # stop at the tolerance, or where the residual stops improving: below ~1e-11 mm it
             # is rounding (and branch switches inside the kernel), not a function of sigma
-            if abs(r) <= tol or runs >= LANDING_MAX_RUNS or r == r_prev or not improved:
+            if ((abs(r) <= tol and not self.past_end) or runs >= LANDING_MAX_RUNS
+                    or r == r_prev or not improved):
                 break
             if self.resident:
                 kept = (sigma, self.u[:n].copy(), self.pts[:n].copy())
             sigma, sigma_prev, r_prev = (min(sigma - r * (sigma - sigma_prev) / (r - r_prev), 1.0),
                                          sigma, r)
-        if sigma != best[1]:  # the last run was not the best one: back to the best
-            sigma = best[1]
+        if sigma != best[2]:  # the last run was not the best one: back to the best
+            sigma = best[2]
             if kept is not None and kept[0] == sigma:
                 self.u[:n], self.pts[:n] = kept[1], kept[2]
+                self.past_end = best[0]
             else:
                 self.run(sigma)
                 runs += 1.0
+        # The residual is monotone in sigma, so the search above ends before the end; should it
+        # not (a kernel branch switching with sigma), lower sigma (a little slower) until the
+        # point lies before the end: by twice the overshoot's arc, then twice that again.
+        cut = 2.0 * best[1] / total
+        for _ in range(LANDING_MAX_RUNS):
+            if not self.past_end:
+                break
+            sigma *= 1.0 - max(cut, 16.0 * EPS)
+            self.run(sigma)
+            runs += 1.0
+            cut *= 2.0
+        if self.past_end:
+            # a bug, not bad input: the command line reports it as an internal error
+            raise RuntimeError(f"the landing leaves point {n - 1} of a stretch on or past its "
+                               f"end u = {self.u_end!r}")
         return _Landing(sigma, None, 0.0, runs)
 
-    def _land_bump(self, bump: _Bump, sigma: float, r_full: float,
+    def _land_bump(self, bump: _Bump, sigma: float, r_full: float, past_full: bool,
                    tol: float) -> tuple[float, float] | None:
         """Step 2 of the landing: the depth e of the bump that takes out the overshoot r_full < 0
         of the full run, by a secant search over runs from the bump's first point on (the best
         run where rounding stops it short of the tolerance). Returns e and the runs (as a share
         of the full run), or None if e would exceed BUMP_MAX_SLOWDOWN or no bump does better
-        than none."""
+        than none or leaves the point past the end (past_full: the full run's does)."""
         share = (self.n - 1 - bump.k0) / (self.n - 1)
         # r rises by sigma * (arc taken out): exactly sigma * v_c D / 2 per unit of e
         e_prev, r_prev = 0.0, r_full
         e = -r_full / (sigma * float(bump.taken.sum()))
-        best = (abs(r_full), 0.0)
+        best = (past_full, abs(r_full), 0.0)  # a run past the end ranks below any other
         runs = 0.0
         for _ in range(LANDING_MAX_RUNS):
             if not 0.0 < e <= BUMP_MAX_SLOWDOWN:
                 return None
             r = self.run(sigma, e, from_bump=True)
             runs += share
-            if abs(r) < best[0]:
-                best = (abs(r), e)
+            if (self.past_end, abs(r)) < best[:2]:
+                best = (self.past_end, abs(r), e)
             # stop at the tolerance, or where the residual stops improving (rounding)
-            if abs(r) <= tol or r == r_prev or abs(r) >= abs(r_prev):
+            if (abs(r) <= tol and not self.past_end) or r == r_prev or abs(r) >= abs(r_prev):
                 break
             e, e_prev, r_prev = e - r * (e - e_prev) / (r - r_prev), e, r
-        if best[1] == 0.0:  # no bump did better than none
+        if best[2] == 0.0 or best[0]:  # no bump did better than none, or none lands before the end
             return None
-        if e != best[1]:
-            e = best[1]
+        if e != best[2]:
+            e = best[2]
             self.run(sigma, e, from_bump=True)
             runs += share
         return e, runs
