@@ -9,12 +9,14 @@ All three methods consume the same targets ds_k = s(t_{k+1}) - s(t_k), t_k = k T
            c2 = 2 C'(u~).(C(u~) - C(u)), c3 = |C(u~) - C(u)|^2 - ds^2. The root near zero,
            (-c2 + sqrt(disc)) / (2 c1), is computed as -2 c3 / (c2 + sqrt(disc)) (same root, no
            cancellation); du = 0 when disc < 0 (the paper's rule).
-Where |C'(u)| vanishes (repeated control points, design §3a) a step solves its arc length
-integral(|C'|, u, u + du) = ds directly (`_arc_step`, adaptive Gauss-Legendre) instead of dividing
-by |C'|; rk2c and rk4 also do so when |C'| changes by more than a quarter within the step, which
-only happens right next to such a point. Not the chord: there the curve can turn back within
-one step, the chord is far shorter than the arc and |C(u + du) - C(u)| = ds has roots on both
-legs of the turn; a chord step landed on the far leg, ahead of the law by more than its target.
+Where |C'(u)| vanishes (repeated control points, design §3a) a step solves the chord equation
+|C(u + du) - C(u)| = ds directly instead of dividing by |C'|; rk2c and rk4 also do so when |C'|
+changes by more than a quarter within the step, which only happens right next to such a point,
+or when the tangent turns by more than 60 degrees within it (a hairpin whose |C'| dips and rises
+alike on both legs). There the curve can turn back within one step and the chord equation has
+roots on both legs of the turn: `_leg_step` first solves the arc, integral(|C'|, u, u + du) =
+ds (`_arc_step`, adaptive Gauss-Legendre), then the chord root from there on, unless the chord
+reaches ds only where the arc exceeds LEG_ARC_MAX ds (the far leg): then the arc root stands.
 
 End landing: rk2c makes every chord equal to its target, so its arc position runs ahead of the
 time law (by the arc minus the chord of every step, ~1 um over a curve) and the last step would
@@ -72,6 +74,11 @@ SLOW_SPEED_REL = 1e-3  # |C'| below this fraction of the mean |C'| is treated as
 # rk2c / rk4: when |C'| changes by more than this fraction across one step, the step is next to
 # a point where C' = 0 and the Taylor-based update is not valid there: solve the chord instead.
 STEP_SPEED_CHANGE_MAX = 0.25
+# rk2c / rk4: when the tangent turns by more than 60 degrees across one step (cos below this),
+# the step rounds a hairpin whose |C'| dips and rises again alike on its two legs (unseen by the
+# speed change): the chord there is far shorter than the arc, and the chord correction lands on
+# the far leg. Solve the arc instead.
+STEP_TURN_COS_MIN = 0.5
 LANDING_REL_TOL = 1e-6  # of the last target: the last chord matches it to 1e-4 % ...
 LANDING_REL_MAX = 5e-6  # ... or, where rounding does not resolve that, to half rk2c's 1e-5
 LANDING_MAX_RUNS = 8
@@ -91,6 +98,9 @@ GAUSS_W = (0.23692688505618928, 0.4786286704993663, 0.5688888888888887, 0.478628
            0.23692688505618928)
 ARC_REL_TOL = 1e-12  # of the target: what `_arc_step` resolves the arc of a step to
 ARC_MAX_DEPTH = 48  # halvings of a piece by `_arc`: far below any step's rounding
+# `_leg_step`: a chord root whose arc exceeds its target this much (relative) lies past a
+# turn-back (rk2c's own arc exceeds its chord by 4.6 % where the tangent turns 60 degrees)
+LEG_ARC_MAX = 1.1
 
 
 @jit
@@ -190,10 +200,49 @@ def _arc_step(knots, coef, degree, n_ctrl, u, ds, guess, span):
 
 
 @jit
-def _chord_step(knots, coef, degree, n_ctrl, u, px, py, pz, ds, guess, span):
-    """The du > 0 with |C(u + du) - P| = ds, by bracketing and Illinois regula falsi."""
-    lo = 0.0
-    g_lo = -ds
+def _leg_step(knots, coef, degree, n_ctrl, u, px, py, pz, ds, guess, span):
+    """The step beside a point where C' (nearly) vanishes: the du > 0 whose chord from
+    P = C(u) is ds on the leg the arc ds reaches, or, past a turn-back, whose arc is ds.
+
+    The chord equation alone has roots on both legs of a turn-back, and bracketing from du = 0
+    can land on the far one (ahead of the law by more than the step). The arc root comes first
+    (arc = ds, chord <= ds, `_arc_step`); the chord root is sought from it on, as rk2c's other
+    steps make chords equal their targets: stepping arcs here and chords beside would jump by
+    the arc minus the chord (a 5 % jerk at a tight corner). If the chord reaches ds only where
+    the arc exceeds LEG_ARC_MAX ds, it does so on the far leg of a turn-back: the arc root
+    stands."""
+    du_arc = _arc_step(knots, coef, degree, n_ctrl, u, ds, guess, span)
+    span = find_span(knots, degree, n_ctrl, u + du_arc, span)
+    cx, cy, cz, _, _, _ = point_d1(knots, coef, degree, span, u + du_arc)
+    chord = math.sqrt((cx - px) ** 2 + (cy - py) ** 2 + (cz - pz) ** 2)
+    if chord >= ds:
+        return du_arc
+    # bracket the chord root beyond the arc root, by widths doubling from the chord's shortfall
+    width = du_arc * (ds - chord) / ds + 4.0 * EPS * (abs(u) + du_arc)
+    arc = ds
+    lo = du_arc
+    for _ in range(CHORD_ITERATIONS):
+        hi = lo + width
+        span = find_span(knots, degree, n_ctrl, u + hi, span)
+        cx, cy, cz, _, _, _ = point_d1(knots, coef, degree, span, u + hi)
+        arc += _arc(knots, coef, degree, n_ctrl, u + lo, u + hi, ARC_REL_TOL * ds, span)
+        if arc > LEG_ARC_MAX * ds:
+            return du_arc
+        if math.sqrt((cx - px) ** 2 + (cy - py) ** 2 + (cz - pz) ** 2) >= ds:
+            return _chord_step(knots, coef, degree, n_ctrl, u, px, py, pz, ds, lo, hi, span)
+        lo = hi
+        width *= 2.0
+    return du_arc
+
+
+@jit
+def _chord_step(knots, coef, degree, n_ctrl, u, px, py, pz, ds, lo, guess, span):
+    """The du > lo with |C(u + du) - P| = ds (the chord at lo short of ds), by bracketing from
+    guess and Illinois regula falsi."""
+    lo0 = lo
+    span = find_span(knots, degree, n_ctrl, u + lo, span)
+    cx, cy, cz, _, _, _ = point_d1(knots, coef, degree, span, u + lo)
+    g_lo = math.sqrt((cx - px) ** 2 + (cy - py) ** 2 + (cz - pz) ** 2) - ds if lo > 0.0 else -ds
     hi = guess
     g_hi = -ds
     for _ in range(CHORD_ITERATIONS):
@@ -204,7 +253,7 @@ def _chord_step(knots, coef, degree, n_ctrl, u, px, py, pz, ds, guess, span):
             break
         lo = hi
         g_lo = g_hi
-        hi *= 2.0
+        hi = lo0 + 2.0 * (hi - lo0)
     side = 0
     for _ in range(CHORD_ITERATIONS):
         if hi - lo <= 1e-16 * (abs(u) + hi) or g_hi == g_lo:
@@ -272,7 +321,8 @@ def step_spans(method, knots, coef, degree, n_spans, u0, ds, sigma, slow_speed, 
                 _, _, _, tx, ty, tz = point_d1(knots, coef, degree, s4, u + h / sp3)
                 sp4 = math.sqrt(tx * tx + ty * ty + tz * tz)
                 slow = (sp2 < slow_speed or sp3 < slow_speed or sp4 < slow_speed
-                        or abs(1.0 - speed / sp4) > STEP_SPEED_CHANGE_MAX)
+                        or abs(1.0 - speed / sp4) > STEP_SPEED_CHANGE_MAX
+                        or dx * tx + dy * ty + dz * tz < STEP_TURN_COS_MIN * speed * sp4)
                 if not slow:
                     u = u + h * (k1 + 2.0 / sp2 + 2.0 / sp3 + 1.0 / sp4) / 6.0
                     continue
@@ -280,7 +330,8 @@ def step_spans(method, knots, coef, degree, n_spans, u0, ds, sigma, slow_speed, 
                 s2 = find_span(knots, degree, n_ctrl, u + h * k1, span)
                 _, _, _, tx, ty, tz = point_d1(knots, coef, degree, s2, u + h * k1)
                 sp2 = math.sqrt(tx * tx + ty * ty + tz * tz)
-                slow = sp2 < slow_speed or abs(1.0 - speed / sp2) > STEP_SPEED_CHANGE_MAX
+                slow = (sp2 < slow_speed or abs(1.0 - speed / sp2) > STEP_SPEED_CHANGE_MAX
+                        or dx * tx + dy * ty + dz * tz < STEP_TURN_COS_MIN * speed * sp2)
                 if not slow:
                     ut = u + 0.5 * h * (k1 + 1.0 / sp2)
                     s3 = find_span(knots, degree, n_ctrl, ut, s2)
@@ -311,19 +362,20 @@ def step_spans(method, knots, coef, degree, n_spans, u0, ds, sigma, slow_speed, 
                         chord = math.sqrt((qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2)
                         if abs(chord - h) > KNOT_CHORD_REL * h:
                             u = u + _chord_step(knots, coef, degree, n_ctrl, u, px, py, pz, h,
+                                                0.0,
                                                 min(ut - u, u_range) if ut > u else h / speed,
                                                 span)
                             continue
                     u = ut
                     continue
-        # Beside a point where C' (nearly) vanishes the curve can turn back within one step:
-        # the chord there is far shorter than the arc, and the chord equation has roots on
-        # both legs of the turn, so a chord step can land on the far leg (up to 0.07 um ahead
-        # of the law in one period, a 2x jerk from positions, and a landing residual that
-        # jumps with sigma). The law is in arc length: step the arc itself there.
+        # Beside a point where C' (nearly) vanishes the curve can turn back within one step,
+        # and the chord equation has roots on both legs of the turn: a chord step from du = 0
+        # landed on the far leg (0.07 um of arc ahead of the law in one period, a 2x-4x jerk
+        # from positions, a landing residual jumping with sigma). `_leg_step` keeps to the
+        # leg the arc reaches.
         guess = h / slow_speed if speed < slow_speed else h / speed
         guess = min(guess, u_range)
-        u = u + _arc_step(knots, coef, degree, n_ctrl, u, h, guess, span)
+        u = u + _leg_step(knots, coef, degree, n_ctrl, u, px, py, pz, h, guess, span)
 
 
 @jit

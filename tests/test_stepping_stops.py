@@ -16,7 +16,7 @@ from numpy.polynomial.legendre import leggauss
 
 from nurbsfeed.cli import main
 from nurbsfeed.geometry import NurbsCurve
-from nurbsfeed.interpolate import Interpolation, interpolate
+from nurbsfeed.interpolate import LEG_ARC_MAX, Interpolation, interpolate
 from nurbsfeed.machine import load_machine
 from nurbsfeed.pipeline import plan_block
 from nurbsfeed.program import CurveBlock
@@ -24,7 +24,9 @@ from nurbsfeed.readers import read_program
 
 DATA = Path(__file__).parent / "data" / "stepping-stops"
 MACHINE = load_machine("default", {})
-JERK_SLACK = 0.01  # the jerk from the true arc may exceed J_t by this fraction (rk2c's drift)
+# the jerk of the true arc may exceed J_t by this fraction: rk2c's arc minus chord changes from
+# step to step at a sharp turn (1.4 % in stop-jerk, beside its stop)
+JERK_SLACK = 0.02
 
 
 def stepped(name: str) -> list[tuple[NurbsCurve, Interpolation]]:
@@ -67,9 +69,10 @@ def test_points_beside_a_stop_sit_at_the_laws_arc(name: str) -> None:
         s_true = true_arc_mm(curve, run.u)
         assert np.allclose(s_true, true_arc_mm(curve, run.u, pieces=32), rtol=0, atol=1e-11)
         # rk2c makes every chord its target, so each step's arc exceeds it by arc minus chord
-        # (0.4 % at most here, on a curvature peak of 530 /mm): 163 % on the far leg of the turn
+        # (2.5 % at most here, at a sharp turn beside the stop): 163 % on the far leg of a turn
         arc = np.diff(s_true)
-        assert np.all(np.abs(arc - run.ds_mm) <= 0.005 * run.ds_mm)
+        assert np.all(arc >= (1.0 - 1e-4) * run.ds_mm)
+        assert np.all(arc <= LEG_ARC_MAX * run.ds_mm)
         assert np.max(np.abs(third_difference(run.s_mm, period))) <= limit
         assert np.max(np.abs(third_difference(s_true, period))) <= (1.0 + JERK_SLACK) * limit
 
