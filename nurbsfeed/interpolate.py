@@ -98,6 +98,7 @@ GAUSS_W = (0.23692688505618928, 0.4786286704993663, 0.5688888888888887, 0.478628
            0.23692688505618928)
 ARC_REL_TOL = 1e-12  # of the target: what `_arc_step` resolves the arc of a step to
 ARC_MAX_DEPTH = 48  # halvings of a piece by `_arc`: far below any step's rounding
+ARC_MAX_PIECES = 4096  # pieces `_arc` splits at most
 # `_leg_step`: a chord root whose arc exceeds its target this much (relative) lies past a
 # turn-back (rk2c's own arc exceeds its chord by 4.6 % where the tangent turns 60 degrees)
 LEG_ARC_MAX = 1.1
@@ -122,6 +123,8 @@ def _arc(knots, coef, degree, n_ctrl, a, b, tol, span):
     """The arc length of C over [a, b] (a <= b) to about tol, by adaptive Gauss-Legendre: a
     piece is halved until its halves add up to it within its share of tol. |C'| has a kink
     where C' = 0 and a narrow dip where it nearly vanishes, which a fixed rule misses."""
+    if b <= a:  # a piece narrower than u's rounding
+        return 0.0
     stack_a = np.empty(ARC_MAX_DEPTH + 2)
     stack_b = np.empty(ARC_MAX_DEPTH + 2)
     stack_q = np.empty(ARC_MAX_DEPTH + 2)
@@ -132,6 +135,7 @@ def _arc(knots, coef, degree, n_ctrl, a, b, tol, span):
     top = 1
     total = 0.0
     width = b - a
+    pieces = 0
     while top > 0:
         top -= 1
         lo = stack_a[top]
@@ -140,8 +144,11 @@ def _arc(knots, coef, degree, n_ctrl, a, b, tol, span):
         mid = 0.5 * (lo + hi)
         left, span = _gauss_arc(knots, coef, degree, n_ctrl, lo, mid, span)
         right, span = _gauss_arc(knots, coef, degree, n_ctrl, mid, hi, span)
-        if (abs(left + right - q) <= tol * (hi - lo) / width or top >= ARC_MAX_DEPTH
-                or mid <= lo or mid >= hi):
+        # beside the tolerance, a floor of rounding (tol may lie below it) and a cap on the
+        # pieces: the work stays bounded however tight tol is
+        pieces += 1
+        if (abs(left + right - q) <= max(tol * (hi - lo) / width, 8.0 * EPS * abs(left + right))
+                or top >= ARC_MAX_DEPTH or pieces >= ARC_MAX_PIECES or mid <= lo or mid >= hi):
             total += left + right
             continue
         # the right half first on the stack's top: the pieces are summed from a to b
