@@ -11,7 +11,12 @@ All three methods consume the same targets ds_k = s(t_{k+1}) - s(t_k), t_k = k T
            cancellation); du = 0 when disc < 0 (the paper's rule).
 Where |C'(u)| vanishes (repeated control points, design §3a) a step solves the chord equation
 |C(u + du) - C(u)| = ds directly instead of dividing by |C'|; rk2c and rk4 also do so when |C'|
-changes by more than a quarter within the step, which only happens right next to such a point.
+changes by more than a quarter within the step, which only happens right next to such a point,
+or when the tangent turns by more than 60 degrees within it (a hairpin whose |C'| dips and rises
+alike on both legs). There the curve can turn back within one step and the chord equation has
+roots on both legs of the turn: `_leg_step` first solves the arc, integral(|C'|, u, u + du) =
+ds (`_arc_step`, adaptive Gauss-Legendre), then the chord root from there on, unless the chord
+reaches ds only where the arc exceeds LEG_ARC_MAX ds (the far leg): then the arc root stands.
 
 End landing: rk2c makes every chord equal to its target, so its arc position runs ahead of the
 time law (by the arc minus the chord of every step, ~1 um over a curve) and the last step would
@@ -31,7 +36,10 @@ end, equals its own target:
    search over full runs (d residual / d sigma ~ -length), never above 1.
 Both searches stop when the last chord matches its target to LANDING_REL_TOL, or to the rounding
 floor of the stepping where that is coarser (but at most LANDING_REL_MAX), or where rounding
-stops them improving (then the best run stands).
+stops them improving (then the best run stands). A run whose point n - 1 lies on or past the end
+is never kept (the machine would pass the end and come back, or u would step back at a rest):
+it ranks below every run before the end, and should the searches end on one, sigma is lowered
+until the point lies before the end (an internal error if it never does).
 Where the plan rests inside the curve (a corner), each stretch between rests is stepped and
 landed on its own, so a point falls exactly on the corner.
 
@@ -66,6 +74,11 @@ SLOW_SPEED_REL = 1e-3  # |C'| below this fraction of the mean |C'| is treated as
 # rk2c / rk4: when |C'| changes by more than this fraction across one step, the step is next to
 # a point where C' = 0 and the Taylor-based update is not valid there: solve the chord instead.
 STEP_SPEED_CHANGE_MAX = 0.25
+# rk2c / rk4: when the tangent turns by more than 60 degrees across one step (cos below this),
+# the step rounds a hairpin whose |C'| dips and rises again alike on its two legs (unseen by the
+# speed change): the chord there is far shorter than the arc, and the chord correction lands on
+# the far leg. Solve the arc instead.
+STEP_TURN_COS_MIN = 0.5
 LANDING_REL_TOL = 1e-6  # of the last target: the last chord matches it to 1e-4 % ...
 LANDING_REL_MAX = 5e-6  # ... or, where rounding does not resolve that, to half rk2c's 1e-5
 LANDING_MAX_RUNS = 8
@@ -79,11 +92,164 @@ KNOT_CHORD_REL = 1e-9
 EPS = float(np.finfo(float).eps)
 
 
+# Gauss-Legendre, 5 points on [-1, 1]: the arc of a piece of the curve (`_arc`)
+GAUSS_X = (-0.906179845938664, -0.5384693101056831, 0.0, 0.5384693101056831, 0.906179845938664)
+GAUSS_W = (0.23692688505618928, 0.4786286704993663, 0.5688888888888887, 0.4786286704993663,
+           0.23692688505618928)
+ARC_REL_TOL = 1e-12  # of the target: what `_arc_step` resolves the arc of a step to
+ARC_MAX_DEPTH = 48  # halvings of a piece by `_arc`: far below any step's rounding
+ARC_MAX_PIECES = 4096  # pieces `_arc` splits at most
+# `_leg_step`: a chord root whose arc exceeds its target this much (relative) lies past a
+# turn-back (rk2c's own arc exceeds its chord by 4.6 % where the tangent turns 60 degrees)
+LEG_ARC_MAX = 1.1
+
+
 @jit
-def _chord_step(knots, coef, degree, n_ctrl, u, px, py, pz, ds, guess, span):
-    """The du > 0 with |C(u + du) - P| = ds, by bracketing and Illinois regula falsi."""
+def _gauss_arc(knots, coef, degree, n_ctrl, a, b, span):
+    """Integral of |C'| over [a, b] by 5-point Gauss-Legendre, and the span last used."""
+    half = 0.5 * (b - a)
+    mid = 0.5 * (a + b)
+    total = 0.0
+    for i in range(5):
+        x = mid + half * GAUSS_X[i]
+        span = find_span(knots, degree, n_ctrl, x, span)
+        _, _, _, dx, dy, dz = point_d1(knots, coef, degree, span, x)
+        total += GAUSS_W[i] * math.sqrt(dx * dx + dy * dy + dz * dz)
+    return half * total, span
+
+
+@jit
+def _arc(knots, coef, degree, n_ctrl, a, b, tol, span):
+    """The arc length of C over [a, b] (a <= b) to about tol, by adaptive Gauss-Legendre: a
+    piece is halved until its halves add up to it within its share of tol. |C'| has a kink
+    where C' = 0 and a narrow dip where it nearly vanishes, which a fixed rule misses."""
+    if b <= a:  # a piece narrower than u's rounding
+        return 0.0
+    stack_a = np.empty(ARC_MAX_DEPTH + 2)
+    stack_b = np.empty(ARC_MAX_DEPTH + 2)
+    stack_q = np.empty(ARC_MAX_DEPTH + 2)
+    whole, span = _gauss_arc(knots, coef, degree, n_ctrl, a, b, span)
+    stack_a[0] = a
+    stack_b[0] = b
+    stack_q[0] = whole
+    top = 1
+    total = 0.0
+    width = b - a
+    pieces = 0
+    while top > 0:
+        top -= 1
+        lo = stack_a[top]
+        hi = stack_b[top]
+        q = stack_q[top]
+        mid = 0.5 * (lo + hi)
+        left, span = _gauss_arc(knots, coef, degree, n_ctrl, lo, mid, span)
+        right, span = _gauss_arc(knots, coef, degree, n_ctrl, mid, hi, span)
+        # beside the tolerance, a floor of rounding (tol may lie below it) and a cap on the
+        # pieces: the work stays bounded however tight tol is
+        pieces += 1
+        if (abs(left + right - q) <= max(tol * (hi - lo) / width, 8.0 * EPS * abs(left + right))
+                or top >= ARC_MAX_DEPTH or pieces >= ARC_MAX_PIECES or mid <= lo or mid >= hi):
+            total += left + right
+            continue
+        # the right half first on the stack's top: the pieces are summed from a to b
+        stack_a[top] = mid
+        stack_b[top] = hi
+        stack_q[top] = right
+        stack_a[top + 1] = lo
+        stack_b[top + 1] = mid
+        stack_q[top + 1] = left
+        top += 2
+    return total
+
+
+@jit
+def _arc_step(knots, coef, degree, n_ctrl, u, ds, guess, span):
+    """The du > 0 whose arc from u is ds (integral of |C'| over [u, u + du]), by bracketing and
+    Illinois regula falsi; the arc to each new candidate is added to the arc to the bracket's
+    low end, so that the pieces integrated shrink with the bracket."""
+    tol = ARC_REL_TOL * ds
     lo = 0.0
-    g_lo = -ds
+    arc_lo = 0.0
+    hi = guess
+    arc_hi = _arc(knots, coef, degree, n_ctrl, u, u + hi, tol, span)
+    for _ in range(CHORD_ITERATIONS):
+        if arc_hi >= ds:
+            break
+        lo = hi
+        arc_lo = arc_hi
+        hi *= 2.0
+        arc_hi = arc_lo + _arc(knots, coef, degree, n_ctrl, u + lo, u + hi, tol, span)
+    g_lo = arc_lo - ds
+    g_hi = arc_hi - ds
+    side = 0
+    for _ in range(CHORD_ITERATIONS):
+        if hi - lo <= 1e-16 * (abs(u) + hi) or g_hi == g_lo or -g_lo <= tol or g_hi <= tol:
+            break
+        x = (lo * g_hi - hi * g_lo) / (g_hi - g_lo)
+        if x <= lo or x >= hi:
+            x = 0.5 * (lo + hi)
+        arc_x = arc_lo + _arc(knots, coef, degree, n_ctrl, u + lo, u + x, tol, span)
+        g = arc_x - ds
+        if g < 0.0:
+            lo = x
+            arc_lo = arc_x
+            g_lo = g
+            if side == -1:
+                g_hi *= 0.5
+            side = -1
+        else:
+            hi = x
+            g_hi = g
+            if side == 1:
+                g_lo *= 0.5
+            side = 1
+    return lo if -g_lo < g_hi else hi
+
+
+@jit
+def _leg_step(knots, coef, degree, n_ctrl, u, px, py, pz, ds, guess, span):
+    """The step beside a point where C' (nearly) vanishes: the du > 0 whose chord from
+    P = C(u) is ds on the leg the arc ds reaches, or, past a turn-back, whose arc is ds.
+
+    The chord equation alone has roots on both legs of a turn-back, and bracketing from du = 0
+    can land on the far one (ahead of the law by more than the step). The arc root comes first
+    (arc = ds, chord <= ds, `_arc_step`); the chord root is sought from it on, as rk2c's other
+    steps make chords equal their targets: stepping arcs here and chords beside would jump by
+    the arc minus the chord (a 5 % jerk at a tight corner). If the chord reaches ds only where
+    the arc exceeds LEG_ARC_MAX ds, it does so on the far leg of a turn-back: the arc root
+    stands."""
+    du_arc = _arc_step(knots, coef, degree, n_ctrl, u, ds, guess, span)
+    span = find_span(knots, degree, n_ctrl, u + du_arc, span)
+    cx, cy, cz, _, _, _ = point_d1(knots, coef, degree, span, u + du_arc)
+    chord = math.sqrt((cx - px) ** 2 + (cy - py) ** 2 + (cz - pz) ** 2)
+    if chord >= ds:
+        return du_arc
+    # bracket the chord root beyond the arc root, by widths doubling from the chord's shortfall
+    width = du_arc * (ds - chord) / ds + 4.0 * EPS * (abs(u) + du_arc)
+    arc = ds
+    lo = du_arc
+    for _ in range(CHORD_ITERATIONS):
+        hi = lo + width
+        span = find_span(knots, degree, n_ctrl, u + hi, span)
+        cx, cy, cz, _, _, _ = point_d1(knots, coef, degree, span, u + hi)
+        arc += _arc(knots, coef, degree, n_ctrl, u + lo, u + hi, ARC_REL_TOL * ds, span)
+        if arc > LEG_ARC_MAX * ds:
+            return du_arc
+        if math.sqrt((cx - px) ** 2 + (cy - py) ** 2 + (cz - pz) ** 2) >= ds:
+            return _chord_step(knots, coef, degree, n_ctrl, u, px, py, pz, ds, lo, hi, span)
+        lo = hi
+        width *= 2.0
+    return du_arc
+
+
+@jit
+def _chord_step(knots, coef, degree, n_ctrl, u, px, py, pz, ds, lo, guess, span):
+    """The du > lo with |C(u + du) - P| = ds (the chord at lo short of ds), by bracketing from
+    guess and Illinois regula falsi."""
+    lo0 = lo
+    span = find_span(knots, degree, n_ctrl, u + lo, span)
+    cx, cy, cz, _, _, _ = point_d1(knots, coef, degree, span, u + lo)
+    g_lo = math.sqrt((cx - px) ** 2 + (cy - py) ** 2 + (cz - pz) ** 2) - ds if lo > 0.0 else -ds
     hi = guess
     g_hi = -ds
     for _ in range(CHORD_ITERATIONS):
@@ -94,7 +260,7 @@ def _chord_step(knots, coef, degree, n_ctrl, u, px, py, pz, ds, guess, span):
             break
         lo = hi
         g_lo = g_hi
-        hi *= 2.0
+        hi = lo0 + 2.0 * (hi - lo0)
     side = 0
     for _ in range(CHORD_ITERATIONS):
         if hi - lo <= 1e-16 * (abs(u) + hi) or g_hi == g_lo:
@@ -162,7 +328,8 @@ def step_spans(method, knots, coef, degree, n_spans, u0, ds, sigma, slow_speed, 
                 _, _, _, tx, ty, tz = point_d1(knots, coef, degree, s4, u + h / sp3)
                 sp4 = math.sqrt(tx * tx + ty * ty + tz * tz)
                 slow = (sp2 < slow_speed or sp3 < slow_speed or sp4 < slow_speed
-                        or abs(1.0 - speed / sp4) > STEP_SPEED_CHANGE_MAX)
+                        or abs(1.0 - speed / sp4) > STEP_SPEED_CHANGE_MAX
+                        or dx * tx + dy * ty + dz * tz < STEP_TURN_COS_MIN * speed * sp4)
                 if not slow:
                     u = u + h * (k1 + 2.0 / sp2 + 2.0 / sp3 + 1.0 / sp4) / 6.0
                     continue
@@ -170,7 +337,8 @@ def step_spans(method, knots, coef, degree, n_spans, u0, ds, sigma, slow_speed, 
                 s2 = find_span(knots, degree, n_ctrl, u + h * k1, span)
                 _, _, _, tx, ty, tz = point_d1(knots, coef, degree, s2, u + h * k1)
                 sp2 = math.sqrt(tx * tx + ty * ty + tz * tz)
-                slow = sp2 < slow_speed or abs(1.0 - speed / sp2) > STEP_SPEED_CHANGE_MAX
+                slow = (sp2 < slow_speed or abs(1.0 - speed / sp2) > STEP_SPEED_CHANGE_MAX
+                        or dx * tx + dy * ty + dz * tz < STEP_TURN_COS_MIN * speed * sp2)
                 if not slow:
                     ut = u + 0.5 * h * (k1 + 1.0 / sp2)
                     s3 = find_span(knots, degree, n_ctrl, ut, s2)
@@ -201,14 +369,20 @@ def step_spans(method, knots, coef, degree, n_spans, u0, ds, sigma, slow_speed, 
                         chord = math.sqrt((qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2)
                         if abs(chord - h) > KNOT_CHORD_REL * h:
                             u = u + _chord_step(knots, coef, degree, n_ctrl, u, px, py, pz, h,
+                                                0.0,
                                                 min(ut - u, u_range) if ut > u else h / speed,
                                                 span)
                             continue
                     u = ut
                     continue
+        # Beside a point where C' (nearly) vanishes the curve can turn back within one step,
+        # and the chord equation has roots on both legs of the turn: a chord step from du = 0
+        # landed on the far leg (0.07 um of arc ahead of the law in one period, a 2x-4x jerk
+        # from positions, a landing residual jumping with sigma). `_leg_step` keeps to the
+        # leg the arc reaches.
         guess = h / slow_speed if speed < slow_speed else h / speed
         guess = min(guess, u_range)
-        u = u + _chord_step(knots, coef, degree, n_ctrl, u, px, py, pz, h, guess, span)
+        u = u + _leg_step(knots, coef, degree, n_ctrl, u, px, py, pz, h, guess, span)
 
 
 @jit
@@ -545,6 +719,7 @@ class _Stretch:
         self.u = np.empty(size)
         self.pts = np.empty((size, 3))
         self.u_bump = self.u_start  # u at the bump's first point, from the last full run
+        self.past_end = False  # whether the last run's point n - 1 lies on or past the end
         # one pass over the targets: their sum, the last one, rk2c's drift (and, if resident,
         # the targets themselves)
         node, drift, total, carry = 0, 0.0, 0.0, 0.0
@@ -604,6 +779,9 @@ class _Stretch:
             if hi == last:
                 break
             k = hi
+        # a point on or past the end would make the machine go past it and back (or, at a rest
+        # inside the curve, step u back for the next stretch): the landing never keeps such a run
+        self.past_end = u >= self.u_end
         last_point = self.pts[base + m]  # the run's last stepped point (n - 1)
         gap = math.sqrt(sum((float(self.end_point[i]) - float(last_point[i])) ** 2
                             for i in range(3)))
@@ -628,7 +806,7 @@ class _Stretch:
         r = self.run(sigma)
         runs = 1.0
         if abs(r) > tol and r < 0.0 and self.bump is not None:
-            landed = self._land_bump(self.bump, sigma, r, tol)
+            landed = self._land_bump(self.bump, sigma, r, self.past_end, tol)
             if landed is not None:
                 slowdown, bump_runs = landed
                 return _Landing(sigma, self.bump, slowdown, runs + bump_runs)
@@ -638,60 +816,77 @@ class _Stretch:
         # raise the speed). A resident stretch keeps the best run after the first aside, so
         # that a last run that made things worse (rounding) costs a copy back.
         sigma_prev, r_prev = sigma, r
-        best = (abs(r), sigma)
+        best = (self.past_end, abs(r), sigma)  # a run past the end ranks below any other
         kept = None
         sigma = min(sigma + r / total, 1.0)
-        while abs(r_prev) > tol:
+        while abs(r_prev) > tol or best[0]:
             r = self.run(sigma)
             runs += 1.0
-            improved = abs(r) < best[0]
+            improved = (self.past_end, abs(r)) < best[:2]
             if improved:
-                best = (abs(r), sigma)
+                best = (self.past_end, abs(r), sigma)
             # stop at the tolerance, or where the residual stops improving: below ~1e-11 mm it
             # is rounding (and branch switches inside the kernel), not a function of sigma
-            if abs(r) <= tol or runs >= LANDING_MAX_RUNS or r == r_prev or not improved:
+            if ((abs(r) <= tol and not self.past_end) or runs >= LANDING_MAX_RUNS
+                    or r == r_prev or not improved):
                 break
             if self.resident:
                 kept = (sigma, self.u[:n].copy(), self.pts[:n].copy())
             sigma, sigma_prev, r_prev = (min(sigma - r * (sigma - sigma_prev) / (r - r_prev), 1.0),
                                          sigma, r)
-        if sigma != best[1]:  # the last run was not the best one: back to the best
-            sigma = best[1]
+        if sigma != best[2]:  # the last run was not the best one: back to the best
+            sigma = best[2]
             if kept is not None and kept[0] == sigma:
                 self.u[:n], self.pts[:n] = kept[1], kept[2]
+                self.past_end = best[0]
             else:
                 self.run(sigma)
                 runs += 1.0
+        # The residual is monotone in sigma, so the search above ends before the end; should it
+        # not (a kernel branch switching with sigma), lower sigma (a little slower) until the
+        # point lies before the end: by twice the overshoot's arc, then twice that again.
+        cut = 2.0 * best[1] / total
+        for _ in range(LANDING_MAX_RUNS):
+            if not self.past_end:
+                break
+            sigma *= 1.0 - max(cut, 16.0 * EPS)
+            self.run(sigma)
+            runs += 1.0
+            cut *= 2.0
+        if self.past_end:
+            # a bug, not bad input: the command line reports it as an internal error
+            raise RuntimeError(f"the landing leaves point {n - 1} of a stretch on or past its "
+                               f"end u = {self.u_end!r}")
         return _Landing(sigma, None, 0.0, runs)
 
-    def _land_bump(self, bump: _Bump, sigma: float, r_full: float,
+    def _land_bump(self, bump: _Bump, sigma: float, r_full: float, past_full: bool,
                    tol: float) -> tuple[float, float] | None:
         """Step 2 of the landing: the depth e of the bump that takes out the overshoot r_full < 0
         of the full run, by a secant search over runs from the bump's first point on (the best
         run where rounding stops it short of the tolerance). Returns e and the runs (as a share
         of the full run), or None if e would exceed BUMP_MAX_SLOWDOWN or no bump does better
-        than none."""
+        than none or leaves the point past the end (past_full: the full run's does)."""
         share = (self.n - 1 - bump.k0) / (self.n - 1)
         # r rises by sigma * (arc taken out): exactly sigma * v_c D / 2 per unit of e
         e_prev, r_prev = 0.0, r_full
         e = -r_full / (sigma * float(bump.taken.sum()))
-        best = (abs(r_full), 0.0)
+        best = (past_full, abs(r_full), 0.0)  # a run past the end ranks below any other
         runs = 0.0
         for _ in range(LANDING_MAX_RUNS):
             if not 0.0 < e <= BUMP_MAX_SLOWDOWN:
                 return None
             r = self.run(sigma, e, from_bump=True)
             runs += share
-            if abs(r) < best[0]:
-                best = (abs(r), e)
+            if (self.past_end, abs(r)) < best[:2]:
+                best = (self.past_end, abs(r), e)
             # stop at the tolerance, or where the residual stops improving (rounding)
-            if abs(r) <= tol or r == r_prev or abs(r) >= abs(r_prev):
+            if (abs(r) <= tol and not self.past_end) or r == r_prev or abs(r) >= abs(r_prev):
                 break
             e, e_prev, r_prev = e - r * (e - e_prev) / (r - r_prev), e, r
-        if best[1] == 0.0:  # no bump did better than none
+        if best[2] == 0.0 or best[0]:  # no bump did better than none, or none lands before the end
             return None
-        if e != best[1]:
-            e = best[1]
+        if e != best[2]:
+            e = best[2]
             self.run(sigma, e, from_bump=True)
             runs += share
         return e, runs
