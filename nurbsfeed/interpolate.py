@@ -121,8 +121,10 @@ def _gauss_arc(knots, coef, degree, n_ctrl, a, b, span):
 @jit
 def _arc(knots, coef, degree, n_ctrl, a, b, tol, span):
     """The arc length of C over [a, b] (a <= b) to about tol, by adaptive Gauss-Legendre: a
-    piece is halved until its halves add up to it within its share of tol. |C'| has a kink
-    where C' = 0 and a narrow dip where it nearly vanishes, which a fixed rule misses."""
+    piece is halved until its halves add up to it within its share of tol and to no less than
+    its chord. |C'| has a kink where C' = 0 and a narrow dip where it nearly vanishes, which a
+    fixed rule misses; where the curve rests over most of [a, b] (coincident control points)
+    every node of the rule can fall on the rest, and only the chord shows the piece moved."""
     if b <= a:  # a piece narrower than u's rounding
         return 0.0
     stack_a = np.empty(ARC_MAX_DEPTH + 2)
@@ -144,10 +146,16 @@ def _arc(knots, coef, degree, n_ctrl, a, b, tol, span):
         mid = 0.5 * (lo + hi)
         left, span = _gauss_arc(knots, coef, degree, n_ctrl, lo, mid, span)
         right, span = _gauss_arc(knots, coef, degree, n_ctrl, mid, hi, span)
+        span = find_span(knots, degree, n_ctrl, lo, span)
+        ax, ay, az, _, _, _ = point_d1(knots, coef, degree, span, lo)
+        span = find_span(knots, degree, n_ctrl, hi, span)
+        bx, by, bz, _, _, _ = point_d1(knots, coef, degree, span, hi)
+        chord = math.sqrt((bx - ax) ** 2 + (by - ay) ** 2 + (bz - az) ** 2)
         # beside the tolerance, a floor of rounding (tol may lie below it) and a cap on the
         # pieces: the work stays bounded however tight tol is
         pieces += 1
-        if (abs(left + right - q) <= max(tol * (hi - lo) / width, 8.0 * EPS * abs(left + right))
+        slack = max(tol * (hi - lo) / width, 8.0 * EPS * abs(left + right))
+        if ((abs(left + right - q) <= slack and left + right >= chord - slack)
                 or top >= ARC_MAX_DEPTH or pieces >= ARC_MAX_PIECES or mid <= lo or mid >= hi):
             total += left + right
             continue
@@ -710,7 +718,9 @@ class _Stretch:
         key_a, key_b = int(plan.piece_key[p]), int(plan.piece_key[p + 1])
         self.t_a, self.t_b = float(law.key_t_s[key_a]), float(law.key_t_s[key_b])
         self.u_start, self.u_end = float(plan.key_u[key_a]), float(plan.key_u[key_b])
-        last = p == len(plan.piece_periods) - 1
+        # the last stretch that moves ends at the curve's end (a rest of zero length after it,
+        # where the control points coincide, is no motion)
+        last = not bool(np.any(plan.piece_periods[p + 1:] > 0))
         self.end_point = np.asarray(curve.points[-1] if last else curve.point(self.u_end),
                                     dtype=float)
         self.n_spans = int(np.searchsorted(curve.knots, self.u_end, side="left"))
