@@ -131,6 +131,11 @@ def _arc(knots, coef, degree, n_ctrl, a, b, tol, span):
     stack_b = np.empty(ARC_MAX_DEPTH + 2)
     stack_q = np.empty(ARC_MAX_DEPTH + 2)
     whole, span = _gauss_arc(knots, coef, degree, n_ctrl, a, b, span)
+    # positions carry rounding of EPS times their coordinates, and so does any arc from them:
+    # no piece is split for less (a step of 10 nm asks 1e-20 mm of tol)
+    span = find_span(knots, degree, n_ctrl, a, span)
+    ax, ay, az, _, _, _ = point_d1(knots, coef, degree, span, a)
+    floor = 8.0 * EPS * (abs(ax) + abs(ay) + abs(az))
     stack_a[0] = a
     stack_b[0] = b
     stack_q[0] = whole
@@ -154,7 +159,7 @@ def _arc(knots, coef, degree, n_ctrl, a, b, tol, span):
         # beside the tolerance, a floor of rounding (tol may lie below it) and a cap on the
         # pieces: the work stays bounded however tight tol is
         pieces += 1
-        slack = max(tol * (hi - lo) / width, 8.0 * EPS * abs(left + right))
+        slack = max(tol * (hi - lo) / width, 8.0 * EPS * abs(left + right), floor)
         if ((abs(left + right - q) <= slack and left + right >= chord - slack)
                 or top >= ARC_MAX_DEPTH or pieces >= ARC_MAX_PIECES or mid <= lo or mid >= hi):
             total += left + right
