@@ -85,3 +85,23 @@ def test_check_passes_on_the_conversion(tmp_path: Path, name: str) -> None:
     checked = runner.invoke(main, ["check", str(DATA / name), str(out)])
     assert checked.exit_code == 0, checked.output
     assert "result: OK: 0 violation(s)" in checked.output
+
+
+# A quarter circle of radius 10 (rational quadratic): kappa 0.1 everywhere, so the limit is
+# sqrt(A_n / kappa) = 31.62 mm/s under the linuxcnc profile at every point, and no node shows
+# more than any other. Its shoulder segments one grid interval long once peaked at 32.08 and
+# 33.16 mm/s between their two nodes: v^2 kappa 9 % over A_n where no node looked.
+QUARTER = NurbsCurve.build(2, [0, 0, 0, 1, 1, 1], [[10, 0, 0], [10, 10, 0], [0, 10, 0]],
+                           [1, 2**-0.5, 1])
+
+
+def test_a_peak_between_two_nodes_keeps_the_limit_at_every_point() -> None:
+    """Measured at every interpolation point (tests/limits_check, the curve's own curvature),
+    and on the law itself, sampled at 0.1 ms (the circle's limit is one number)."""
+    lim = load_machine("linuxcnc").limits
+    plan = plan_curve(QUARTER, lim)
+    m = measure(QUARTER, interpolate(plan, "rk2c"), lim)
+    assert m.normal_acc <= lim.normal_acc_mm_s2 * (1 + LIMIT_REL), m
+    assert plan.piece_scale.size == 1  # rest to rest: the law runs at v / piece_scale
+    v = plan.law.sample(np.arange(0.0, plan.law.duration_s, 1e-4))[1] / plan.piece_scale[0]
+    assert v.max() <= np.sqrt(lim.normal_acc_mm_s2 / 0.1) * (1 + LIMIT_REL), v.max()

@@ -14,8 +14,11 @@ everywhere, whole periods (design §2).
    to the next, so a violation lies on a shoulder where the S-curve accelerates sooner (or
    decelerates later) than the limit allows, or in the cruise. A shoulder violation adds a key
    point that holds the key speed up to the violation ("hold"), a cruise violation lowers the
-   segment's cap; then the scan runs again. What is left after MAX_FIX_ROUNDS is removed by
-   slowing the whole law uniformly (time scale lambda >= 1 keeps every limit).
+   segment's cap; then the scan runs again. A segment's peak that lies between two nodes, with
+   no node in its cruise, is seen by none: the grid gains nodes there and planning starts again
+   (PEAK_NODE_ROUNDS). What is left after MAX_FIX_ROUNDS is removed by slowing the whole law
+   uniformly (time scale lambda >= 1 keeps every limit), a peak still hidden included, by its
+   limit evaluated on the curve.
 6. Whole periods: the time law is stretched by lambda >= 1 so that its duration is a whole
    number of periods (v/lambda, a/lambda^2, j/lambda^3: limits still hold). Where the motion
    rests inside the curve (a corner), each stretch between rests gets its own lambda, so that an
