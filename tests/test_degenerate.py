@@ -21,13 +21,16 @@ from click.testing import CliRunner
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
+from nurbsfeed.analysis.check import check_files
 from nurbsfeed.cli import main
 from nurbsfeed.gcode.writer import MoveWriter
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.interpolate import interpolate
 from nurbsfeed.machine import load_machine
+from nurbsfeed.pipeline import convert_file
 from nurbsfeed.planning.limits import Limits
 from nurbsfeed.planning.planner import KIND_CORNER, KIND_CUSP, KIND_NAMES, plan_curve
+from nurbsfeed.readers import read_program
 from tests.conftest import load_curve
 from tests.motion_check import FD_REL, motion, written_moves
 
@@ -214,3 +217,28 @@ def test_random_degenerate_curves_move_on_the_curve_within_the_limits(curve, fee
     assert np.all(np.diff(period) >= 1)
     deviation = np.linalg.norm(written - points[period], axis=1)
     assert deviation.max() <= rounding_mm * (1 + 1e-9)
+
+
+def test_a_reversal_beside_a_double_knot_is_a_stop(tmp_path: Path) -> None:
+    """Fuzzer find: a cubic along X (all its points on the X axis) turns back three times, once
+    just before a knot of multiplicity 2, where C'' jumps: Gauss-Newton from the middle of the
+    samples around it ran to the knot and stayed, the stop was missed, and the stepping crossed
+    the turn within one period (6474 mm/s^2 from positions; the motion guard refused the
+    curve). Every sign change of x'(u), found here by dense sampling, must be a stop node."""
+    source = CASES / "double-knot-reversal.nc"
+    curves = [item.curve for item in read_program(source) if hasattr(item, "curve")]
+    machine = load_machine("default")
+    curve = curves[2]  # the third curve lies on the X axis: a sign change of x' is a reversal
+    assert np.all(curve.points[:, 1:] == 0.0)
+    u = np.linspace(curve.u_min, curve.u_max, 2_000_001)
+    dx = curve.derivatives(u)[1][:, 0]
+    flips = u[np.flatnonzero(np.sign(dx[:-1]) * np.sign(dx[1:]) < 0)]
+    assert flips.size == 3
+    plan = plan_curve(curve, machine.limits)
+    stops = plan.grid.u[plan.grid.stop_index]
+    for flip in flips:
+        assert np.min(np.abs(stops - flip)) <= 1e-6, (flip, stops)
+    target = tmp_path / "out.nc"
+    convert_file(source, target, machine)
+    report = check_files(source, target, machine)
+    assert report.ok, "\n".join(map(str, report.violations))

@@ -405,6 +405,25 @@ def _kappa_or_nan(knots, coef, degree, u, zero_speed):
 
 
 @jit
+def _turn_back(knots, coef, degree, tx, ty, tz, low, high):
+    """Where C'.t changes sign in [low, high] (positive at low, negative at high), by
+    bisection to the resolution of u."""
+    n_ctrl = coef.shape[0]
+    span = find_span(knots, degree, n_ctrl, low, degree)
+    for _ in range(ZERO_ITERATIONS):
+        mid = 0.5 * (low + high)
+        if mid <= low or mid >= high:
+            break
+        span = find_span(knots, degree, n_ctrl, mid, span)
+        _, _, _, dx, dy, dz = point_d1(knots, coef, degree, span, mid)
+        if dx * tx + dy * ty + dz * tz > 0.0:
+            low = mid
+        else:
+            high = mid
+    return 0.5 * (low + high)
+
+
+@jit
 def _refine_zero(knots, coef, degree, u, low, high):
     """Step 3a: Gauss-Newton towards a minimum of |C'|^2 in [low, high] from u, (u, |C'(u)|).
 
@@ -540,6 +559,13 @@ def _stops(knots, coef, degree, breaks, u, speed, tangent, zero_speed, floor_mm,
             continue
         at, at_speed = _refine_zero(knots, coef, degree, 0.5 * (u[q] + u[q + 1]), u[q],
                                     u[q + 1])
+        if at_speed > zero_speed:
+            # Gauss-Newton from the middle can leave for the bracket's end and stay there (C''
+            # jumps at a knot of multiplicity 2); the tangent's component along the first
+            # sample's changes sign inside, and bisecting it brackets the turn
+            start = _turn_back(knots, coef, degree, tangent[q, 0], tangent[q, 1],
+                               tangent[q, 2], u[q], u[q + 1])
+            at, at_speed = _refine_zero(knots, coef, degree, start, u[q], u[q + 1])
         if at_speed <= zero_speed:
             found[n] = at
             n += 1
