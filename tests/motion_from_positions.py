@@ -1,7 +1,8 @@
 """The motion the machine feels, measured from positions one period apart (tests and benches).
 
 tests/motion_check gives speed and acceleration; this adds the jerk vector, split along the
-path, and the motion of each axis. Along C(s) at speed v, tangential acceleration a and jerk j:
+path, and the motion of each axis. Along C(s) at speed v, tangential acceleration a and jerk j
+(T, N, B the Frenet frame here, T the period below):
 
     velocity     = v T
     acceleration = a T + kappa v^2 N
@@ -22,11 +23,12 @@ Finite-difference error: each n-th divided difference is the mean of the true n-
 under a positive B-spline weight n periods wide, so it never exceeds the motion's own peak (the
 law's jerk steps are averaged, not overshot) and at its centre it is P^(n) + c T^2 P^(n+2) with
 c = 1/24, 1/12, 1/8 for n = 1, 2, 3; on uniform circular motion at angular rate w it is exactly
-P^(n) sinc(wT/2)^n in norm, within n (wT)^2 / 24 of it. The chord P_k+1 - P_k is the velocity
-at t_k+1/2 plus T^3 P''' / 24, so the split turns by at most T^2 |P'''| / (24 v) rad and moves
-up to |D| T^2 |P'''| / (24 v) of a difference D between along and across. Position rounding e adds at most
-2^n e / T^n: 0.008 mm/s^3 of jerk per femtometre at T = 1 ms, which is why positions must be
-full precision (rounding to a 0.1 um output grid alone could read as 400,000 mm/s^3).
+P^(n) sinc(wT/2)^n in norm, within n (wT)^2 / 24 of it. The chord P_k+1 - P_k is T times the
+velocity at t_k+1/2 plus T^3 P''' / 24, so the split turns by up to T^2 |P'''| / (24 v) rad and
+shifts up to |D| T^2 |P'''| / (24 v) of a difference D between its parts along and across.
+Position rounding e adds up to 2^n e / T^n: 0.008 mm/s^3 of jerk per femtometre at T = 1 ms,
+which is why positions must be full precision (rounding to a 0.1 um output grid alone could
+read as 400,000 mm/s^3).
 """
 
 from __future__ import annotations
