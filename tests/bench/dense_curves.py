@@ -58,20 +58,20 @@ def dense_curves(quick: bool = False) -> list[NurbsCurve]:
     curves = [
         # 40 mm figure-eight, smooth: the crossing and the lobes only
         _fitted("figure-eight", _figure_eight(40.0, 0.0, 121)),
-        # the same with near-cusps at both lobe tips (speed along t drops twentyfold)
+        # the same with near-cusps (~50 um radius) at both lobe tips
         _fitted("figure-eight-cusps", _figure_eight(40.0, 0.475, 241)),
-        # five-pointed star, 50 mm across, near-cusps of ~0.1 mm radius at the points
+        # five-pointed star, 45 mm across, near-cusps of ~10 um radius at the points
         _fitted("star", _star(25.0, 0.95, 301)),
-        # a 2 mm figure-eight with near-cusps: every bend far tighter than the feed
+        # a 2 mm figure-eight with near-cusps (~3 um radius): every bend far tighter than the feed
         _fitted("tiny-figure-eight", _figure_eight(2.0, 0.475, 121)),
-        # a 3 mm star: the near-cusps at ~10 um radius
+        # a 3 mm star: near-cusps of ~0.5 um radius, below the chord tolerance
         _fitted("tiny-star", _star(1.5, 0.95, 301)),
         # a 3-turn helical ramp, radius 10 mm, pitch 2 mm: the torsion term and Z
         _fitted("helix", _helix(10.0, 2.0, 3.0, 181)),
     ]
     if not quick:
         curves += [
-            # a CAM-like curve of 60 spans, ~350 mm, ~20 tight bends (tests/bench/programs.py)
+            # a CAM-like curve of 60 spans, ~380 mm, bends down to 0.3 mm radius (bench/programs.py)
             _long_cam_curve(63),
             # a 10-turn helical ramp of 601 samples, ~630 mm: many spans, steady motion
             _fitted("long-helix", _helix(10.0, 2.0, 10.0, 601)),
