@@ -1,0 +1,79 @@
+"""Dense test curves in the style of the feedrate-planning literature, for tests/bench/path_jerk.
+
+Each curve is a closed-form path sampled densely, the samples taken as the control points of a
+clamped cubic B-spline with knots averaged from the chord lengths (de Boor, as
+tests/bench/programs.py does), which follows the path to within the polygon's own sagging; or one
+of the benchmark's seeded CAM-like curves. All are deterministic.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from nurbsfeed.geometry import NurbsCurve
+from tests.bench.programs import random_curves
+
+
+def _fitted(name: str, points: np.ndarray) -> NurbsCurve:
+    """points (M, 2 or 3) as the control points of a clamped cubic B-spline."""
+    chord = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    t = chord / chord[-1]
+    inner = [t[j:j + 3].mean() for j in range(1, len(points) - 3)]
+    return NurbsCurve.build(3, np.concatenate([np.zeros(4), inner, np.ones(4)]), points, None,
+                            name)
+
+
+def _figure_eight(width_mm: float, tip_bump: float, samples: int) -> np.ndarray:
+    """x = w/2 sin t, y = w/4 (sin 2t + tip_bump sin 4t): at tip_bump 0.475 the lobe tips at
+    t = pi/2, 3pi/2 move at 1/20 of the speed elsewhere, with a curvature spike there."""
+    t = np.linspace(0.0, 2 * np.pi, samples)
+    return np.column_stack([width_mm / 2 * np.sin(t),
+                            width_mm / 4 * (np.sin(2 * t) + tip_bump * np.sin(4 * t))])
+
+
+def _star(radius_mm: float, cusp_share: float, samples: int) -> np.ndarray:
+    """The hypotrochoid x = 4r cos t + d cos 4t, y = 4r sin t - d sin 4t (r = radius_mm / 5):
+    five cusps at d = r, five near-cusps of radius shrinking with 1 - d / r below it."""
+    r = radius_mm / 5
+    d = cusp_share * r
+    t = np.linspace(0.0, 2 * np.pi, samples)
+    return np.column_stack([4 * r * np.cos(t) + d * np.cos(4 * t),
+                            4 * r * np.sin(t) - d * np.sin(4 * t)])
+
+
+def _helix(radius_mm: float, pitch_mm: float, turns: float, samples: int) -> np.ndarray:
+    t = np.linspace(0.0, 2 * np.pi * turns, samples)
+    return np.column_stack([radius_mm * np.cos(t), radius_mm * np.sin(t),
+                            pitch_mm * t / (2 * np.pi)])
+
+
+def _long_cam_curve(n_ctrl: int) -> NurbsCurve:
+    spec = random_curves(1, seed=7, n_ctrl=n_ctrl)[0]
+    return NurbsCurve.build(3, spec["knots"], spec["control_points"], spec["weights"],
+                            f"cam-{n_ctrl}")
+
+
+def dense_curves(quick: bool = False) -> list[NurbsCurve]:
+    """The curves, small to large; `quick` leaves out the long ones."""
+    curves = [
+        # 40 mm figure-eight, smooth: the crossing and the lobes only
+        _fitted("figure-eight", _figure_eight(40.0, 0.0, 121)),
+        # the same with near-cusps (~50 um radius) at both lobe tips
+        _fitted("figure-eight-cusps", _figure_eight(40.0, 0.475, 241)),
+        # five-pointed star, 45 mm across, near-cusps of ~10 um radius at the points
+        _fitted("star", _star(25.0, 0.95, 301)),
+        # a 2 mm figure-eight with near-cusps (~3 um radius): every bend far tighter than the feed
+        _fitted("tiny-figure-eight", _figure_eight(2.0, 0.475, 121)),
+        # a 3 mm star: near-cusps of ~0.5 um radius, below the chord tolerance
+        _fitted("tiny-star", _star(1.5, 0.95, 301)),
+        # a 3-turn helical ramp, radius 10 mm, pitch 2 mm: the torsion term and Z
+        _fitted("helix", _helix(10.0, 2.0, 3.0, 181)),
+    ]
+    if not quick:
+        curves += [
+            # a CAM-like curve of 60 spans, ~380 mm, bends down to 0.3 mm radius (bench/programs.py)
+            _long_cam_curve(63),
+            # a 10-turn helical ramp of 601 samples, ~630 mm: many spans, steady motion
+            _fitted("long-helix", _helix(10.0, 2.0, 10.0, 601)),
+        ]
+    return curves
