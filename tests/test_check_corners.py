@@ -10,6 +10,7 @@ themselves keep the limits (their jerk from the trace: 49,939 mm/s^3 at most).
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 
@@ -19,7 +20,9 @@ import pytest
 from nurbsfeed.analysis import check_files
 from nurbsfeed.analysis.check import project_points
 from nurbsfeed.analysis.check.curve_checks import least_time_s
+from nurbsfeed.analysis.check.projection import nearest_on_curve
 from nurbsfeed.analysis.common import curve_blocks
+from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.machine import load_machine
 from nurbsfeed.pipeline import convert_file
 from nurbsfeed.program import CurveBlock
@@ -152,3 +155,24 @@ def test_a_real_violation_beside_a_turn_back_is_still_caught(tmp_path: Path, bro
     report = check_files(source, target, machine)
     found = {(v.check, int(v.where.rsplit(":", 1)[1])) for v in report.violations}
     assert found & expected, "\n".join(map(str, report.violations))
+
+
+def test_the_nearest_point_beside_a_corner_knot_is_found_on_either_leg() -> None:
+    """Fuzzer find (data/check-corners/corner-wrong-leg-deviation.json): the point written just
+    before a corner of a rational polyline, (-2, 1.488, -3.42699) under the default profile, is
+    7.11e-6 mm from the leg before the corner and 8.77e-6 mm from the leg after it; the search
+    zoomed across the corner knot onto the farther leg and check called it 1.012x the rounding
+    allowance off the curve. Distances to the two straight legs are the closed-form oracle."""
+    raw = json.loads((CASES / "corner-wrong-leg-deviation.json").read_text())["curves"][0]
+    curve = NurbsCurve.build(raw["degree"], raw["knots"], raw["control_points"], raw["weights"])
+    before, corner, after = (np.array(raw["control_points"][k]) for k in (1, 2, 3))
+
+    def to_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+        t = np.clip(np.dot(p - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
+        return float(np.linalg.norm(p - (a + t * (b - a))))
+
+    written = np.array([-2.0, 1.488, -3.42699])
+    on_leg = to_segment(written, before, corner)
+    assert on_leg < to_segment(written, corner, after) - 1e-6
+    _, nearest = nearest_on_curve(curve, written[None, :])
+    assert nearest[0] == pytest.approx(on_leg, abs=1e-12)

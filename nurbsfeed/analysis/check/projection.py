@@ -353,6 +353,7 @@ def nearest_on_curve(curve: NurbsCurve, targets: np.ndarray) -> tuple[np.ndarray
     # to a sample no farther than the nearest sample plus that chord: near a corner or a
     # turn-back the nearest sample can be on the wrong leg
     reach = float(np.linalg.norm(np.diff(on_curve, axis=0), axis=1).max())
+    breaks = curve.span_breaks
     foot = np.empty(len(targets))
     out = np.empty(len(targets))
     for i, target in enumerate(targets):
@@ -360,11 +361,15 @@ def nearest_on_curve(curve: NurbsCurve, targets: np.ndarray) -> tuple[np.ndarray
         out[i] = np.inf
         for k in np.flatnonzero(far <= far.min() + reach):
             lo, hi = u[max(k - 1, 0)], u[min(k + 1, u.size - 1)]
-            for _ in range(NEAREST_LEVELS):
-                fine = np.linspace(lo, hi, NEAREST_SAMPLES)
-                d2 = np.sum((curve.point(fine) - target) ** 2, axis=1)
-                best = int(np.argmin(d2))
-                lo, hi = fine[max(best - 1, 0)], fine[min(best + 1, fine.size - 1)]
-            if d2[best] < out[i] ** 2:
-                foot[i], out[i] = fine[best], np.sqrt(d2[best])
+            # each span on its own: at a corner knot the distance has a minimum on each leg, a
+            # hair apart in u, and one zoom across the knot can settle on the farther one
+            ends = np.concatenate(([lo], breaks[(breaks > lo) & (breaks < hi)], [hi]))
+            for a, b in zip(ends[:-1], ends[1:]):
+                for _ in range(NEAREST_LEVELS):
+                    fine = np.linspace(a, b, NEAREST_SAMPLES)
+                    d2 = np.sum((curve.point(fine) - target) ** 2, axis=1)
+                    best = int(np.argmin(d2))
+                    a, b = fine[max(best - 1, 0)], fine[min(best + 1, fine.size - 1)]
+                if d2[best] < out[i] ** 2:
+                    foot[i], out[i] = fine[best], np.sqrt(d2[best])
     return foot, out
