@@ -176,6 +176,20 @@ def _arc(knots, coef, degree, n_ctrl, a, b, tol, span):
 
 
 @jit
+def _illinois(x, g, lo, hi, g_lo, g_hi, side):
+    """One step of Illinois regula falsi: the bracket [lo, hi] (g_lo < 0 <= g_hi) after the
+    candidate x with value g, and the side it replaced (-1: lo, 1: hi). Replacing the same side
+    twice halves the other end's value, so that the bracket shrinks from both ends."""
+    if g < 0.0:
+        if side == -1:
+            g_hi *= 0.5
+        return x, hi, g, g_hi, -1
+    if side == 1:
+        g_lo *= 0.5
+    return lo, x, g_lo, g, 1
+
+
+@jit
 def _arc_step(knots, coef, degree, n_ctrl, u, ds, guess, span):
     """The du > 0 whose arc from u is ds (integral of |C'| over [u, u + du]), by bracketing and
     Illinois regula falsi; the arc to each new candidate is added to the arc to the bracket's
@@ -204,18 +218,8 @@ def _arc_step(knots, coef, degree, n_ctrl, u, ds, guess, span):
         arc_x = arc_lo + _arc(knots, coef, degree, n_ctrl, u + lo, u + x, tol, span)
         g = arc_x - ds
         if g < 0.0:
-            lo = x
             arc_lo = arc_x
-            g_lo = g
-            if side == -1:
-                g_hi *= 0.5
-            side = -1
-        else:
-            hi = x
-            g_hi = g
-            if side == 1:
-                g_lo *= 0.5
-            side = 1
+        lo, hi, g_lo, g_hi, side = _illinois(x, g, lo, hi, g_lo, g_hi, side)
     return lo if -g_lo < g_hi else hi
 
 
@@ -284,18 +288,7 @@ def _chord_step(knots, coef, degree, n_ctrl, u, px, py, pz, ds, lo, guess, span)
         g = math.sqrt((cx - px) ** 2 + (cy - py) ** 2 + (cz - pz) ** 2) - ds
         if g == 0.0:
             return x
-        if g < 0.0:
-            lo = x
-            g_lo = g
-            if side == -1:
-                g_hi *= 0.5
-            side = -1
-        else:
-            hi = x
-            g_hi = g
-            if side == 1:
-                g_lo *= 0.5
-            side = 1
+        lo, hi, g_lo, g_hi, side = _illinois(x, g, lo, hi, g_lo, g_hi, side)
     return lo if -g_lo < g_hi else hi
 
 

@@ -350,21 +350,18 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
         rounds += 1
         if not changed:
             break
-    hidden_peak_s = np.full((n_seg, 2), np.nan)
+    hidden_peak_s = np.empty((n_seg, 2))
     for seg in range(n_seg):
-        if _hidden_peak(seg, s_mm, limit, key_node, key_s, v, peak, hold_start, hold_end, d_up,
-                        d_down):
-            accel_end = key_s[seg] + hold_start[seg] + d_up[seg]
-            hidden_peak_s[seg, 0] = accel_end
-            hidden_peak_s[seg, 1] = max(key_s[seg + 1] - hold_end[seg] - d_down[seg], accel_end)
+        hidden_peak_s[seg, 0], hidden_peak_s[seg, 1] = _hidden_peak(
+            seg, s_mm, limit, key_node, key_s, v, peak, hold_start, hold_end, d_up, d_down)
     return (v, peak, t0, s0, v0, a0, jk, key_t, duration, v_nodes, rounds, shoulder_at,
             hidden_peak_s)
 
 
 @jit
 def _hidden_peak(seg, s_mm, limit, key_node, key_s, v, peak, hold_start, hold_end, d_up, d_down):
-    """Whether segment seg's peak speed, held over [accel_end, decel_start], hides between two
-    nodes and may break the limit there.
+    """The stretch [accel_end, decel_start] over which segment seg holds its peak speed, where
+    that peak hides between two nodes and may break the limit there ((NaN, NaN): it does not).
 
     Between two adjacent nodes the limit is at least the lower of theirs (every curvature
     maximum is a node), and away from its peak the law's speed is monotone between nodes; so
@@ -372,15 +369,16 @@ def _hidden_peak(seg, s_mm, limit, key_node, key_s, v, peak, hold_start, hold_en
     where no node looks (a circle's shoulders one grid interval apart ran 5 % over
     sqrt(A_n / kappa))."""
     if not peak[seg] > max(v[seg], v[seg + 1]) * (1.0 + SPEED_CHECK_REL_TOL):
-        return False
+        return math.nan, math.nan
     accel_end = key_s[seg] + hold_start[seg] + d_up[seg]
     decel_start = max(key_s[seg + 1] - hold_end[seg] - d_down[seg], accel_end)
     after = np.searchsorted(s_mm, accel_end, side="left")  # the first node at or after it
     if after < s_mm.size and s_mm[after] <= decel_start:
-        return False  # a node in the cruise: checked
-    if after <= key_node[seg] or after > key_node[seg + 1]:
-        return False
-    return peak[seg] > min(limit[after - 1], limit[after]) * (1.0 + SPEED_CHECK_REL_TOL)
+        return math.nan, math.nan  # a node in the cruise: checked
+    if (after <= key_node[seg] or after > key_node[seg + 1]
+            or peak[seg] <= min(limit[after - 1], limit[after]) * (1.0 + SPEED_CHECK_REL_TOL)):
+        return math.nan, math.nan
+    return accel_end, decel_start
 
 
 def _too_long(cycle_s: float, max_curve_time_s: float) -> str:
