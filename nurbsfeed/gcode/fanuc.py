@@ -213,13 +213,19 @@ class NurbsCurveReader:
         text = match.group(1)
         return self._closing_knot(Word("K", float(text), text, decimals_written(text), line, 1))
 
+    @property
+    def takes_runs(self) -> bool:
+        """Whether `take_run` can read a line now: past the clamped start, before the closing
+        knots, no unknown axis."""
+        return not (self.n_closing or self.unknown or len(self.knots) < self.order)
+
     def take_run(self, program: ProgramCodes, pos: int, line: int) -> tuple[int, int]:
         """`take_line` for the run of lines from text position `pos` (line number `line`) on,
         scanned at once in compiled code (point_lines.py). Reads the lines `take_line` would
         read without a check of `_knot`: past the clamped start, knots increasing, weights
         positive; the first line the scan refuses is left to `take_line` or `take`.
         Returns (lines read, text position after them); (0, pos) when it read none."""
-        if self.n_closing or self.unknown or len(self.knots) < self.order:
+        if not self.takes_runs:
             return 0, pos
         n, last_start, end = scan_point_lines(program.codes, pos, self.knots[-1], program.values)
         if not n:

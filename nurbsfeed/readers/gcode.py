@@ -137,6 +137,8 @@ class _Reader:
         point_lines.RUN_LINES of them and only as far as they are ASCII (where string and byte
         positions agree; a point line is ASCII): the number of lines it read, now consumed."""
         assert isinstance(self.open, NurbsCurveReader), "called inside a G06.2 / G6.2 curve"
+        if not self.open.takes_runs:  # (before the text is joined: ~50 us a call)
+            return 0
         batch = ahead.peek(point_lines.RUN_LINES)
         text = "".join(batch)
         if not text.isascii():  # rare: find the first line that is not
@@ -232,11 +234,8 @@ class _LookAhead:
 
     def peek(self, n: int) -> list[str]:
         """The next `n` lines (fewer at the end), left to be taken."""
-        while len(self.ahead) < n:
-            line = next(self.lines, None)
-            if line is None:
-                break
-            self.ahead.append(line)
+        if len(self.ahead) < n:
+            self.ahead.extend(itertools.islice(self.lines, n - len(self.ahead)))
         return list(itertools.islice(self.ahead, n))
 
     def drop(self, n: int) -> None:
