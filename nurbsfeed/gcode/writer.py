@@ -237,7 +237,10 @@ def round_ticks(points: np.ndarray, decimals: int, per_mm: float = 1.0) -> np.nd
     (per_mm of them to a mm), rounded as `_emit_moves` rounds them."""
     values = np.ascontiguousarray(points, dtype=float)
     out = np.empty(values.shape, dtype=np.int64)
-    _round_many(values.reshape(-1), per_mm, 10.0**decimals, out.reshape(-1))
+    flat = values.reshape(-1)
+    # read-only always, however `points` came: one compiled signature to load, not two
+    flat.flags.writeable = False
+    _round_many(flat, per_mm, 10.0**decimals, out.reshape(-1))
     return out
 
 
