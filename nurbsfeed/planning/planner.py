@@ -198,34 +198,28 @@ def _key_points(kappa, raw_limit, fcap, stop_index, stop_cos, peak_index, feed_n
     return limit, key_node, key_kind, nominal, cap, n_peaks
 
 
-@jit
 def _whole_periods(v_key, key_t, key_node, limit, v_nodes, period_s, slowdown):
     """Step 6: the uniform slowdown (whatever the key points could not fix: the largest v / limit
     over the nodes that are not keys, at least the slowdown given), the keys where the motion
     rests (P+1,), and per stretch between them (P,) its whole number of periods and its lambda.
     A stretch that would last more than MAX_STRETCH_PERIODS periods, or not a finite number,
-    gets -1 (the caller refuses the curve): rounded into int64 it could wrap to a small count."""
-    is_key = np.zeros(limit.size, dtype=np.bool_)
-    is_key[key_node] = True
-    for n in range(limit.size):
-        if limit[n] > 0.0 and not is_key[n]:
-            slowdown = max(slowdown, v_nodes[n] / limit[n])
-    rests = [0]
-    for k in range(1, v_key.size - 1):
-        if v_key[k] == 0.0:
-            rests.append(k)
-    rests.append(v_key.size - 1)
-    piece_key = np.array(rests)
+    gets -1 (the caller refuses the curve): rounded into int64 it could wrap to a small count.
+    (numpy, not a kernel: a few operations per curve, cheaper than loading one more kernel.)"""
+    checked = limit > 0.0
+    checked[key_node] = False
+    if checked.any():
+        slowdown = max(slowdown, float((v_nodes[checked] / limit[checked]).max()))
+    piece_key = np.concatenate(([0], np.flatnonzero(v_key[1:-1] == 0.0) + 1, [v_key.size - 1]))
     piece_periods = np.zeros(piece_key.size - 1, dtype=np.int64)
     piece_scale = np.ones(piece_key.size - 1)
     for p in range(piece_key.size - 1):
-        duration = key_t[piece_key[p + 1]] - key_t[piece_key[p]]
+        duration = float(key_t[piece_key[p + 1]] - key_t[piece_key[p]])
         exact = duration * slowdown / period_s
         if not exact <= MAX_STRETCH_PERIODS:
             piece_periods[p] = -1
         elif duration > 0.0:
             piece_periods[p] = max(1, math.ceil(exact * (1.0 - PERIOD_ROUNDING_REL)))
-            piece_scale[p] = piece_periods[p] * period_s / duration
+            piece_scale[p] = float(piece_periods[p]) * period_s / duration
     return slowdown, piece_key, piece_periods, piece_scale
 
 
