@@ -33,7 +33,7 @@ from nurbsfeed.errors import (
     Location,
     NurbsfeedError,
 )
-from nurbsfeed.machine import FLOAT_KEYS, INT_KEYS, load_machine
+from nurbsfeed.machine import FLOAT_KEYS, INT_KEYS, JERK_MODELS, load_machine
 
 if TYPE_CHECKING:
     from nurbsfeed.machine import Machine
@@ -123,13 +123,15 @@ def machine_options(func: Callable[..., Any]) -> Callable[..., Any]:
         func = click.option(f"--{key.replace('_', '-')}", key,
                             type=int if key in INT_KEYS else float, default=None,
                             help=f"Override the profile's {key}.")(func)
+    func = click.option("--jerk-model", "jerk_model", type=click.Choice(list(JERK_MODELS)),
+                        default=None, help="Override the profile's jerk_model.")(func)
     return click.option("--machine", "-m", default="default", show_default=True,
                         help="Machine profile: a built-in name (default, linuxcnc, "
                              "paper-table1) or a YAML file.")(func)
 
 
 def machine_from(kwargs: dict[str, Any]) -> Machine:
-    overrides = {k: kwargs.pop(k) for k in FLOAT_KEYS + INT_KEYS}
+    overrides = {k: kwargs.pop(k) for k in FLOAT_KEYS + INT_KEYS + ("jerk_model",)}
     return load_machine(kwargs.pop("machine"), overrides)
 
 
@@ -497,7 +499,7 @@ def plan(input: Path, dialect: str, **kwargs: Any) -> None:
                        f"{item.curve.input_u(p.grid.u[node]):>12.8f} "
                        f"{p.grid.s_mm[node]:>12.6f} {p.grid.kappa_1_mm[node]:>12.6g} "
                        f"{p.key_nominal_mm_s[k]:>10.4f} {p.key_v_mm_s[k]:>10.4f}")
-        a, j = lim.acc_mm_s2, lim.jerk_mm_s3
+        a, j = p.scurve_acc_mm_s2, p.scurve_jerk_mm_s3
         click.echo(f"  segments ({unit}, {unit}/s):")
         click.echo(f"  {'#':>3} {'length':>12} {'v_start':>10} {'v_peak':>10} {'v_end':>10} "
                    f"{'hold_in':>9} {'hold_out':>9} {'cruise':>10}")

@@ -54,8 +54,18 @@ LIMIT_KEYS = {"period_s": "period_s", "max_feed_mm_s": "feed_mm_s",
               "max_jerk_mm_s3": "jerk_mm_s3", "max_normal_acc_mm_s2": "normal_acc_mm_s2",
               "max_normal_jerk_mm_s3": "normal_jerk_mm_s3"}
 REQUIRED_KEYS = tuple(LIMIT_KEYS)  # the others have the Machine's default (decimals: auto)
-FLOAT_KEYS = REQUIRED_KEYS + ("max_curve_time_s", "min_block_time_s", "rest_move_s")
+AXES = ("x", "y", "z")
+# per-axis limits (path model only): key -> (Limits field, axis index)
+AXIS_KEYS = {f"max_{what}_{axis}_{unit}": (field, i)
+             for what, unit, field in (("vel", "mm_s", "axis_vel_mm_s"),
+                                       ("acc", "mm_s2", "axis_acc_mm_s2"),
+                                       ("jerk", "mm_s3", "axis_jerk_mm_s3"))
+             for i, axis in enumerate(AXES)}
+FLOAT_KEYS = (REQUIRED_KEYS + ("max_curve_time_s", "min_block_time_s", "rest_move_s")
+              + tuple(AXIS_KEYS))
 INT_KEYS = ("decimals", "feed_decimals", "move_periods")
+JERK_MODELS = ("paper", "path")  # profile key jerk_model (planning.path_model)
+RANGES_OF_AXIS = {"vel": (1e-3, 1e5), "acc": (1e-3, 1e7), "jerk": (1e-3, 1e10)}
 # The accepted values, ends included (README "Profile keys" says why each is physical).
 RANGES: dict[str, tuple[float, float]] = {
     "period_s": (1e-6, 1.0),
@@ -71,6 +81,7 @@ RANGES: dict[str, tuple[float, float]] = {
     "decimals": (0, 8),
     "feed_decimals": (0, 6),
     "move_periods": (1, 1000),
+    **{key: RANGES_OF_AXIS[key.split("_")[1]] for key in AXIS_KEYS},
 }
 MAX_MOVE_S = RANGES["period_s"][1]
 # a move this much (relative) shorter than min_block_time_s still meets it: 2 x 0.00051 is not
@@ -127,7 +138,7 @@ def machine_from_mapping(data: Any, where: str, places: Mapping[str, Location] |
     if not isinstance(data, dict):
         raise ProfileError("a machine profile is a mapping of keys to values, not "
                            f"{type(data).__name__}", here)
-    known = set(FLOAT_KEYS) | set(INT_KEYS)
+    known = set(FLOAT_KEYS) | set(INT_KEYS) | {"jerk_model"}
     for key in data:
         if key not in known:
             raise ProfileError(f"unknown key '{key}' (known keys: {', '.join(sorted(known))})",
@@ -141,7 +152,15 @@ def machine_from_mapping(data: Any, where: str, places: Mapping[str, Location] |
                 raise exc.at(places.get(key, here)) from None
         elif key in REQUIRED_KEYS:
             raise ProfileError(f"missing key '{key}'", here)
+    jerk_model = data.get("jerk_model", "paper")
+    if jerk_model not in JERK_MODELS:
+        raise ProfileError(f"'jerk_model' must be one of {', '.join(JERK_MODELS)}, not "
+                           f"{_shown(jerk_model)}", places.get("jerk_model", here))
+    if (overrides or {}).get("jerk_model") is not None:
+        jerk_model = overrides["jerk_model"]  # type: ignore[index]
     for key, value in (overrides or {}).items():
+        if key == "jerk_model":
+            continue
         if value is not None:
             try:
                 values[key] = _check_value(key, value)
@@ -163,12 +182,29 @@ def machine_from_mapping(data: Any, where: str, places: Mapping[str, Location] |
                        ("move_periods", "min_block_time_s", "period_s"), places, overrides,
                        here)
     values["period_s"] = move_s  # what the planner, the stepping and the writer step by
+    axis_given = [key for key in AXIS_KEYS if key in values]
+    if axis_given and jerk_model != "path":
+        raise _refused(f"per-axis limits ({', '.join(axis_given)}) hold only under "
+                       "jerk_model: path (the paper's model limits the path alone)",
+                       (*axis_given, "jerk_model"), places, overrides, here)
+    axis: dict[str, list[float]] = {field: [math.inf] * 3 for field, _ in AXIS_KEYS.values()}
+    for key in axis_given:
+        field, i = AXIS_KEYS[key]
+        axis[field][i] = float(values.pop(key))
     from nurbsfeed.planning.limits import Limits
 
-    limits = Limits(**{field: values.pop(key) for key, field in LIMIT_KEYS.items()})
+    path = {field: float(values.pop(key)) for key, field in LIMIT_KEYS.items()}
+    limits = Limits(path["period_s"], path["feed_mm_s"], path["chord_mm"], path["acc_mm_s2"],
+                    path["jerk_mm_s3"], path["normal_acc_mm_s2"], path["normal_jerk_mm_s3"],
+                    jerk_model, _xyz(axis["axis_vel_mm_s"]), _xyz(axis["axis_acc_mm_s2"]),
+                    _xyz(axis["axis_jerk_mm_s3"]))
     if "decimals" not in values:
         values["decimals"] = auto_decimals(limits, limits.period_s / move_periods)
     return Machine(limits, **values)  # type: ignore[arg-type]
+
+
+def _xyz(values: list[float]) -> tuple[float, float, float]:
+    return values[0], values[1], values[2]
 
 
 def _refused(message: str, keys: tuple[str, ...], places: Mapping[str, Location],

@@ -13,7 +13,14 @@ from click.testing import CliRunner
 
 from nurbsfeed.cli import main
 from nurbsfeed.errors import ProfileError
-from nurbsfeed.machine import INT_KEYS, MAX_PROFILE_BYTES, MAX_PROFILE_NODES, RANGES, load_machine
+from nurbsfeed.machine import (
+    AXIS_KEYS,
+    INT_KEYS,
+    MAX_PROFILE_BYTES,
+    MAX_PROFILE_NODES,
+    RANGES,
+    load_machine,
+)
 from tests.conftest import ROOT, SAMPLES
 from tests.gcode_parse import moves
 
@@ -32,9 +39,16 @@ def option(key: str) -> str:
     return "--" + key.replace("_", "-")
 
 
+def model_for(key: str) -> dict[str, str]:
+    """The jerk model a key needs: per-axis limits hold only under the path model."""
+    return {"jerk_model": "path"} if key in AXIS_KEYS else {}
+
+
 def profile_with(tmp_path: Path, key: str, text: str) -> tuple[Path, int]:
-    """The default profile with `key: text` in place of its own line; the file and that line."""
+    """The default profile with `key: text` in place of its own line (and `jerk_model: path`
+    for a per-axis key); the file and that line."""
     lines = [line for line in DEFAULT.splitlines() if not line.startswith(key + ":")]
+    lines += [f"{k}: {v}" for k, v in model_for(key).items()]
     path = tmp_path / "m.yaml"
     path.write_text("\n".join(lines + [f"{key}: {text}"]) + "\n")
     return path, len(lines) + 1
@@ -44,7 +58,9 @@ def profile_with(tmp_path: Path, key: str, text: str) -> tuple[Path, int]:
 def test_each_end_of_each_range_converts_or_is_refused_at_the_curve(tmp_path: Path, key: str,
                                                                     value: float) -> None:
     out = tmp_path / "q.nc"
-    code, _, stderr = run("convert", str(SOURCE), option(key), str(value), "-o", str(out), "-q")
+    model = ["--jerk-model", "path"] if key in AXIS_KEYS else []
+    code, _, stderr = run("convert", str(SOURCE), option(key), str(value), *model, "-o",
+                          str(out), "-q")
     if code == 0:
         words = NUMBER.findall(re.sub(r"\(.*?\)", "", out.read_text()))
         assert words and all("." in w and math.isfinite(float(w)) for w in words)
@@ -67,7 +83,7 @@ def test_each_end_of_each_range_is_accepted_in_a_file(tmp_path: Path, key: str,
         assert load_machine(str(path)) == load_machine("default", {key: value,
                                                                    "move_periods": 1000})
         return
-    assert load_machine(str(path)) == load_machine("default", {key: value})
+    assert load_machine(str(path)) == load_machine("default", {key: value, **model_for(key)})
 
 
 def outside(key: str) -> list[float]:

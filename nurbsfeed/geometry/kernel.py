@@ -278,6 +278,56 @@ def point_d2(knots, coef, degree, span, u):
 
 
 @jit
+def point_d3(knots, coef, degree, span, u):
+    """C(u) and its first three derivatives on `span`: twelve floats, C first.
+
+    `point_d2` carried one order further, for the path model's dkappa/ds and torsion:
+    C3 = (A3 - 3 W1 C2 - 3 W2 C1 - W3 C) / W, the k in Ak and Wk the order of the derivative."""
+    side, t = _expansion(knots, span, u)
+    ax = coef[span, side, degree, 0]
+    ay = coef[span, side, degree, 1]
+    az = coef[span, side, degree, 2]
+    aw = coef[span, side, degree, 3]
+    dx = dy = dz = dw = 0.0
+    ex = ey = ez = ew = 0.0
+    fx = fy = fz = fw = 0.0
+    for k in range(degree - 1, -1, -1):
+        fx = fx * t + ex
+        fy = fy * t + ey
+        fz = fz * t + ez
+        fw = fw * t + ew
+        ex = ex * t + dx
+        ey = ey * t + dy
+        ez = ez * t + dz
+        ew = ew * t + dw
+        dx = dx * t + ax
+        dy = dy * t + ay
+        dz = dz * t + az
+        dw = dw * t + aw
+        ax = ax * t + coef[span, side, k, 0]
+        ay = ay * t + coef[span, side, k, 1]
+        az = az * t + coef[span, side, k, 2]
+        aw = aw * t + coef[span, side, k, 3]
+    # Horner leaves A1 in d, A2 / 2 in e and A3 / 6 in f
+    inv_w = 1.0 / aw
+    cx = ax / aw
+    cy = ay / aw
+    cz = az / aw
+    c1x = (dx - dw * cx) * inv_w
+    c1y = (dy - dw * cy) * inv_w
+    c1z = (dz - dw * cz) * inv_w
+    w2 = 2.0 * ew
+    c2x = (2.0 * ex - 2.0 * dw * c1x - w2 * cx) * inv_w
+    c2y = (2.0 * ey - 2.0 * dw * c1y - w2 * cy) * inv_w
+    c2z = (2.0 * ez - 2.0 * dw * c1z - w2 * cz) * inv_w
+    w3 = 6.0 * fw
+    c3x = (6.0 * fx - 3.0 * dw * c2x - 3.0 * w2 * c1x - w3 * cx) * inv_w
+    c3y = (6.0 * fy - 3.0 * dw * c2y - 3.0 * w2 * c1y - w3 * cy) * inv_w
+    c3z = (6.0 * fz - 3.0 * dw * c2z - 3.0 * w2 * c1z - w3 * cz) * inv_w
+    return cx, cy, cz, c1x, c1y, c1z, c2x, c2y, c2z, c3x, c3y, c3z
+
+
+@jit
 def curvature(x1, y1, z1, x2, y2, z2):
     """kappa = |C' x C''| / |C'|^3 (NaN where C' = 0) and |C'|, from C' and C''.
 
@@ -301,7 +351,7 @@ def curvature_many(c1, c2, out):
 
 @jit
 def eval_many(knots, coef, degree, u, order, out):
-    """C and its derivatives up to `order` (0, 1 or 2) at every u: out (order+1, M, 3).
+    """C and its derivatives up to `order` (0 to 3) at every u: out (order+1, M, 3).
 
     Parameters in increasing order are fastest (the span of the previous one is tried first);
     outside [u_min, u_max] the end spans extrapolate. Derivatives of order > degree are 0.
@@ -310,6 +360,13 @@ def eval_many(knots, coef, degree, u, order, out):
     span = degree
     for q in range(u.size):
         span = find_span(knots, degree, n_ctrl, u[q], span)
+        if order == 3:
+            d = point_d3(knots, coef, degree, span, u[q])
+            out[0, q, 0], out[0, q, 1], out[0, q, 2] = d[0], d[1], d[2]
+            out[1, q, 0], out[1, q, 1], out[1, q, 2] = d[3], d[4], d[5]
+            out[2, q, 0], out[2, q, 1], out[2, q, 2] = d[6], d[7], d[8]
+            out[3, q, 0], out[3, q, 1], out[3, q, 2] = d[9], d[10], d[11]
+            continue
         cx, cy, cz, c1x, c1y, c1z, c2x, c2y, c2z = point_d2(knots, coef, degree, span, u[q])
         out[0, q, 0] = cx
         out[0, q, 1] = cy

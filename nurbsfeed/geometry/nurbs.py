@@ -200,6 +200,12 @@ class NurbsCurve:
         c0, c1, c2 = self._eval(u, 2)
         return c0, c1, c2
 
+    def derivatives3(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The first three derivatives of C at u: (N,) -> three (N, 3) arrays (the path
+        model's dkappa/ds and torsion need the third)."""
+        _, c1, c2, c3 = self._eval(u, 3)
+        return c1, c2, c3
+
     def speed(self, u: np.ndarray) -> np.ndarray:
         """|C'(u)|: (N,) -> (N,)."""
         c1 = self._eval(u, 1)[1]

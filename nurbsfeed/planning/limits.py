@@ -6,6 +6,7 @@ Names: kappa_1_mm curvature, v_mm_s speed, in mm and seconds.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,6 +25,12 @@ class Limits:
     jerk_mm_s3: float  # J_t
     normal_acc_mm_s2: float  # A_n
     normal_jerk_mm_s3: float  # J_n
+    # "paper": the normal jerk is the proxy v^3 kappa^2 of Eq. 15 and the tangential jerk the
+    # law's j; "path": the jerk vector the machine feels, and the per-axis limits (design §2b)
+    jerk_model: str = "paper"
+    axis_vel_mm_s: tuple[float, float, float] = (math.inf, math.inf, math.inf)  # X, Y, Z
+    axis_acc_mm_s2: tuple[float, float, float] = (math.inf, math.inf, math.inf)
+    axis_jerk_mm_s3: tuple[float, float, float] = (math.inf, math.inf, math.inf)
 
 
 def curvature_threshold(lim: Limits) -> float:
@@ -39,7 +46,8 @@ def curvature_threshold(lim: Limits) -> float:
 def speed_limit(kappa_1_mm: np.ndarray, lim: Limits, feed_mm_s: np.ndarray | float) -> np.ndarray:
     """Pointwise limit v(kappa) (Eq. 15 with the sign of Eq. 14 corrected): (N,) -> (N,).
 
-    min(v_m, (2/T) sqrt(2 rho delta - delta^2), sqrt(A_n rho), cbrt(J_n rho^2)) with rho = 1/kappa.
+    min(v_m, (2/T) sqrt(2 rho delta - delta^2), sqrt(A_n rho), cbrt(J_n rho^2)) with rho = 1/kappa
+    (the last under the paper's jerk model only).
     The chord term saturates at 2 rho / T once delta >= rho (the chord is then a diameter).
     Written in kappa so that kappa = 0 gives the feed cap without dividing by zero.
     """
@@ -48,7 +56,8 @@ def speed_limit(kappa_1_mm: np.ndarray, lim: Limits, feed_mm_s: np.ndarray | flo
     with np.errstate(divide="ignore", invalid="ignore"):
         chord = np.where(k * d < 1.0, (2.0 / t) * np.sqrt(d * (2.0 - k * d) / k), 2.0 / (k * t))
         acc = np.sqrt(lim.normal_acc_mm_s2 / k)
-        jerk = np.cbrt(lim.normal_jerk_mm_s3 / (k * k))
-    v = np.minimum(np.minimum(chord, acc), jerk)
+        v = np.minimum(chord, acc)
+        if lim.jerk_model == "paper":  # the path model's jerk limits: planning.path_model
+            v = np.minimum(v, np.cbrt(lim.normal_jerk_mm_s3 / (k * k)))
     v = np.where(k > 0.0, v, np.inf)
     return np.minimum(v, np.minimum(lim.feed_mm_s, feed_mm_s))

@@ -42,6 +42,13 @@ from nurbsfeed.geometry.nurbs import NurbsCurve, curvature_from_derivatives
 from nurbsfeed.jit import jit
 from nurbsfeed.planning.grid import Grid, build_grid, polygon_length
 from nurbsfeed.planning.limits import Limits, curvature_threshold, speed_limit
+from nurbsfeed.planning.path_model import (
+    frames,
+    jump_limits,
+    motion_ratio,
+    scurve_limits,
+    static_limit,
+)
 from nurbsfeed.planning.scurve import scan_speeds, segment_profiles
 from nurbsfeed.planning.timelaw import TimeLaw, chain_segments, speed_at_arc
 
@@ -90,6 +97,10 @@ class Plan:
     piece_periods: np.ndarray  # (P,) whole periods of each stretch between rests
     piece_scale: np.ndarray  # (P,) lambda >= 1 of each stretch
     fix_rounds: int
+    # the S-curve's own acceleration and jerk: the profile's tangential limits under the paper
+    # model, a share of the lowest limit they add to under the path model
+    scurve_acc_mm_s2: float
+    scurve_jerk_mm_s3: float
 
     @cached_property
     def n_periods(self) -> int:
@@ -380,7 +391,8 @@ def _too_long(cycle_s: float, max_curve_time_s: float) -> str:
             "(raise it in the profile or with --max-curve-time-s)")
 
 
-def _plan_on_grid(grid: Grid, raw_limit, fcap, feed_nodes, kappa0: float, lim: Limits):
+def _plan_on_grid(grid: Grid, raw_limit, fcap, feed_nodes, kappa0: float, lim: Limits,
+                  acc: float, jerk: float, fixed_keys: np.ndarray):
     """Steps 2-5 on one grid, with shoulder key points added where holds cannot help.
 
     Beside a rest where the limit rises steeply (a curve that starts with a hook, a weight near
@@ -389,7 +401,7 @@ def _plan_on_grid(grid: Grid, raw_limit, fcap, feed_nodes, kappa0: float, lim: L
     confines the low cap to the short segment from the rest to it. Likewise beside a near cusp,
     where holding its tiny key speed up to the limit's rise would crawl for seconds: from a
     shoulder the speed rises with the limit."""
-    shoulders = np.empty(0, dtype=np.int64)
+    shoulders = fixed_keys
     for _ in range(SHOULDER_ROUNDS + 1):
         limit, key_node, key_kind, nominal, cap, n_peaks = _key_points(
             grid.kappa_1_mm, raw_limit, fcap, grid.stop_index, grid.stop_cos, grid.peak_index,
@@ -398,7 +410,7 @@ def _plan_on_grid(grid: Grid, raw_limit, fcap, feed_nodes, kappa0: float, lim: L
         hold_end = np.zeros(len(key_node) - 1)
         v, peak, *pieces, key_t, duration, v_nodes, rounds, shoulder_at, hidden_peak_s = \
             _limit_rounds(grid.s_mm, limit, key_node, nominal, cap, hold_start, hold_end,
-                          lim.acc_mm_s2, lim.jerk_mm_s3, HOLD_MAX_PERIODS * lim.period_s)
+                          acc, jerk, HOLD_MAX_PERIODS * lim.period_s)
         if not (shoulder_at >= 0).any():  # (the common case: setdiff1d costs ~50 us)
             break
         new = np.setdiff1d(shoulder_at[shoulder_at >= 0], key_node)
@@ -427,6 +439,53 @@ def _hidden_slowdown(curve: NurbsCurve, grid: Grid, lim: Limits, feed_u, feed_mm
     return max(1.0, float(ratio.max()))
 
 
+def _path_limit(curve: NurbsCurve, grid: Grid, lim: Limits, raw_limit: np.ndarray):
+    """The path model's pointwise limit at the nodes (the static terms, `path_model.
+    static_limit`, and the speed at knots where kappa N jumps) and the knots where that jump
+    sets the limit, which become key points: the law passes them at zero acceleration, at a
+    speed no higher than their limit."""
+    limit = np.minimum(raw_limit, static_limit(frames(curve, grid.u), lim))
+    breaks = curve.span_breaks[1:-1]
+    nodes = np.searchsorted(grid.u, breaks)
+    inside = nodes < grid.u.size
+    nodes, breaks = nodes[inside], breaks[inside]
+    on_node = grid.u[nodes] == breaks
+    nodes, breaks = nodes[on_node], breaks[on_node]
+    at_jump = jump_limits(curve, breaks, lim)
+    lower = at_jump < limit[nodes]
+    limit[nodes[lower]] = at_jump[lower]
+    return limit, nodes[lower].astype(np.int64)
+
+
+PATH_SAMPLES_PER_PERIOD = 2  # the path model's final check samples the law this densely
+PATH_CHUNK = 1 << 16  # samples per chunk of that check: memory stays bounded on long curves
+
+
+def _path_samples(curve: NurbsCurve, grid: Grid, law: TimeLaw, lim: Limits):
+    """Chunks (s, v, motion ratio) of the law sampled PATH_SAMPLES_PER_PERIOD times a period."""
+    if law.duration_s <= 0.0:
+        return
+    n = max(2, int(math.ceil(law.duration_s / lim.period_s * PATH_SAMPLES_PER_PERIOD)) + 1)
+    for start in range(0, n, PATH_CHUNK):
+        t = np.arange(start, min(n, start + PATH_CHUNK)) * (law.duration_s / (n - 1))
+        piece, local, v, a, j = law.sample(t)
+        s = law.s0_mm[piece] + local
+        u = np.interp(s, grid.s_mm, grid.u)
+        yield s, v, motion_ratio(frames(curve, u), v, a, j, lim)
+
+
+def path_slowdown(curve: NurbsCurve, grid: Grid, law: TimeLaw, lim: Limits) -> float:
+    """The uniform slowdown (>= 1) that keeps every path-model limit where the law goes: the
+    law sampled PATH_SAMPLES_PER_PERIOD times a period, each sample's parameter found from its
+    arc length on the grid, and `path_model.motion_ratio` there. The key points and the fix
+    rounds keep the static terms; this covers what the S-curve's own acceleration and jerk add
+    (3 kappa v a across the path, -kappa^2 v^3 + j along it, a T_x per axis)."""
+    worst = 1.0
+    for _, _, ratio in _path_samples(curve, grid, law, lim):
+        worst = max(worst, float(np.max(ratio)))
+    return worst
+
+
 def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
                feed_mm_s: np.ndarray = np.empty(0), max_curve_time_s: float = math.inf) -> Plan:
     """Plan the feed along one curve under `lim` (feed cap already in lim.feed_mm_s).
@@ -439,14 +498,19 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
     feed_breaks = feed_u[1:] if feed_u.size else feed_u
     kappa0 = curvature_threshold(lim)
     extra_u = feed_breaks
+    path = lim.jerk_model == "path"
+    acc, jerk = scurve_limits(lim, np.ptp(curve.points, axis=0) > 0.0)
     for refine in range(PEAK_NODE_ROUNDS + 1):
         grid = build_grid(curve, spacing, extra_u, kappa0)
         fcap = feed_at(grid.u, feed_u, feed_mm_s)
         feed_nodes = np.searchsorted(grid.u, feed_breaks)
         raw_limit = speed_limit(grid.kappa_1_mm, lim, fcap)
+        fixed_keys = np.empty(0, dtype=np.int64)
+        if path:
+            raw_limit, fixed_keys = _path_limit(curve, grid, lim, raw_limit)
         (limit, key_node, key_kind, nominal, n_peaks, v, peak, hold_start, hold_end, pieces,
          key_t, duration, v_nodes, rounds, hidden_peak_s) = _plan_on_grid(
-            grid, raw_limit, fcap, feed_nodes, kappa0, lim)
+            grid, raw_limit, fcap, feed_nodes, kappa0, lim, acc, jerk, fixed_keys)
         hidden = np.flatnonzero(np.isfinite(hidden_peak_s[:, 0]))
         if hidden.size == 0 or refine == PEAK_NODE_ROUNDS:
             break
@@ -467,9 +531,11 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
     law = TimeLaw.from_pieces(t0, s0, v0, a0, jk, key_t, duration)
     if not law.duration_s <= max_curve_time_s:
         raise CurveError(_too_long(law.duration_s, max_curve_time_s))
+    slowdown = _hidden_slowdown(curve, grid, lim, feed_u, feed_mm_s, peak, hidden_peak_s)
+    if path:
+        slowdown = max(slowdown, path_slowdown(curve, grid, law, lim))
     slowdown, piece_key, piece_periods, piece_scale = _whole_periods(
-        v, law.key_t_s, key_node, limit, v_nodes, lim.period_s,
-        _hidden_slowdown(curve, grid, lim, feed_u, feed_mm_s, peak, hidden_peak_s))
+        v, law.key_t_s, key_node, limit, v_nodes, lim.period_s, slowdown)
     if np.any(piece_periods < 0):
         raise CurveError(_too_long(law.duration_s * slowdown, max_curve_time_s))
     cycle_s = float(piece_periods.sum()) * lim.period_s
@@ -480,4 +546,4 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
         arr.setflags(write=False)
     return Plan(curve, lim, grid, kappa0, int(n_peaks), key_node, key_kind, nominal, v, peak,
                 hold_start, hold_end, law, slowdown, piece_key, piece_periods, piece_scale,
-                rounds)
+                rounds, acc, jerk)

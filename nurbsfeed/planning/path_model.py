@@ -1,0 +1,185 @@
+"""The path jerk model (design §2b): the limits the machine feels, along the path and per axis.
+
+Along C(s) at speed v with tangential acceleration a and jerk j (T, N, B the Frenet frame, kappa
+the curvature, kappa' = dkappa/ds, tau the torsion):
+
+    velocity     = v T
+    acceleration = a T + kappa v^2 N
+    jerk         = (j - kappa^2 v^3) T + (3 kappa v a + kappa' v^3) N + kappa tau v^3 B
+
+The paper's model limits j and the proxy v^3 kappa^2; the path model limits the tangential
+component of the jerk by J_t, its normal part (N and B together) by J_n, and each axis's
+velocity, acceleration and jerk by the profile's per-axis limits. Slowing a motion uniformly in
+time by lambda >= 1 divides velocities by lambda, accelerations by lambda^2 and every jerk term
+by lambda^3, so `motion_ratio` gives, per point, the lambda that brings every quantity within
+its limit.
+
+Where the curve is only C1 (a degree-2 curve's knots) the curvature, hence kappa v^2 N, jumps:
+the jerk is unbounded there, and over one period it reads v^2 |D| / T, D the jump of kappa N.
+The limit on that is a speed limit at the knot, `jump_limits`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from nurbsfeed.geometry.nurbs import NurbsCurve
+from nurbsfeed.planning.limits import Limits
+
+# The S-curve's own acceleration and jerk, as a share of the lowest limit they add to: the
+# rest is left for the terms the curve adds where the S-curve accelerates (kappa^2 v^3 beside
+# j = -J along the path, kappa v^2 N_x beside a T_x per axis); what they still break is removed
+# by the planner's uniform slowdown (`planner.path_slowdown`). 0.75 gave the shortest cycles of
+# 0.6, 0.75, 0.85 and 1.0 on the samples and dense test curves.
+SCURVE_SHARE = 0.75
+STRAIGHT_REL = 1e-12  # |C' x C''| below this share of |C'| |C''|: the curve is straight there
+JUMP_REL = 1e-9  # a jump of kappa N below this share of it is rounding, not a jump
+
+
+@dataclass(frozen=True)
+class Frames:
+    """Per point (M,): kappa (1/mm), dkappa/ds (1/mm^2), tau (1/mm); T, N, B (M, 3)."""
+
+    kappa: np.ndarray
+    dkappa_ds: np.ndarray
+    torsion: np.ndarray
+    tangent: np.ndarray
+    normal: np.ndarray
+    binormal: np.ndarray
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.einsum("...i,...i->...", a, b)
+
+
+def frames(curve: NurbsCurve, u: np.ndarray) -> Frames:
+    """The frame and the curvature terms at parameters u (M,).
+
+    b = C' x C'' (|b| = kappa |C'|^3), b' = C' x C''' its derivative in u, so
+    dkappa/du = (b . b') / (|b| |C'|^3) - 3 |b| (C' . C'') / |C'|^5 and tau = (b . C''') / |b|^2.
+    Where the curve is straight (b = 0: an inflection, a line) kappa is 0, the binormal is b''s
+    direction (the one the normal takes as kappa leaves 0) and |dkappa/ds| = |b'| / |C'|^4; where
+    b' is 0 too, N and B are 0 (no jerk term can point there). Where C' = 0 (a stop: the motion
+    rests) everything is 0."""
+    c1, c2, c3 = curve.derivatives3(np.ascontiguousarray(u, dtype=float))
+    speed = np.sqrt(_dot(c1, c1))
+    moving = speed > 0.0
+    safe_speed = np.where(moving, speed, 1.0)
+    tangent = c1 / safe_speed[:, None] * moving[:, None]
+    b = np.cross(c1, c2)
+    b1 = np.cross(c1, c3)
+    nb = np.sqrt(_dot(b, b))
+    nb1 = np.sqrt(_dot(b1, b1))
+    bent = moving & (nb > STRAIGHT_REL * speed * np.sqrt(_dot(c2, c2)))
+    safe_nb = np.where(bent, nb, 1.0)
+    kappa = np.where(bent, nb / safe_speed**3, 0.0)
+    dk_du = np.where(bent, _dot(b, b1) / (safe_nb * safe_speed**3)
+                     - 3.0 * nb * _dot(c1, c2) / safe_speed**5,
+                     nb1 / safe_speed**3)
+    dkappa_ds = np.where(moving, dk_du / safe_speed, 0.0)
+    torsion = np.where(bent, _dot(b, c3) / safe_nb**2, 0.0)
+    straight_dir = np.where((nb1 > 0.0)[:, None], b1 / np.where(nb1 > 0.0, nb1, 1.0)[:, None],
+                            0.0)
+    binormal = np.where(bent[:, None], b / safe_nb[:, None], straight_dir) * moving[:, None]
+    normal = np.cross(binormal, tangent)
+    return Frames(kappa, dkappa_ds, torsion, tangent, normal, binormal)
+
+
+def scurve_limits(lim: Limits, moving_axes: np.ndarray) -> tuple[float, float]:
+    """The acceleration and jerk the S-curve segments use: the profile's tangential limits
+    under the paper model; under the path model SCURVE_SHARE of the lowest of the tangential
+    limit and the limits of the axes the curve moves (a move along one axis alone is that
+    axis's motion)."""
+    if lim.jerk_model == "paper":
+        return lim.acc_mm_s2, lim.jerk_mm_s3
+    acc = min([lim.acc_mm_s2] + [lim.axis_acc_mm_s2[x] for x in range(3) if moving_axes[x]])
+    jerk = min([lim.jerk_mm_s3] + [lim.axis_jerk_mm_s3[x] for x in range(3) if moving_axes[x]])
+    return SCURVE_SHARE * acc, SCURVE_SHARE * jerk
+
+
+def _cbrt_limit(budget: float, per_v3: np.ndarray) -> np.ndarray:
+    with np.errstate(divide="ignore"):
+        return np.where(per_v3 > 0.0, np.cbrt(budget / np.where(per_v3 > 0.0, per_v3, 1.0)),
+                        np.inf)
+
+
+def static_limit(f: Frames, lim: Limits) -> np.ndarray:
+    """The highest speed (M,) at which every path-model quantity holds with a = j = 0 (a key
+    point's state: the S-curve segments start and end there at zero acceleration):
+    kappa^2 v^3 <= J_t, |kappa' N + kappa tau B| v^3 <= J_n, and per axis |v T_x| <= V_x,
+    kappa v^2 |N_x| <= A_x, |(-kappa^2 T + kappa' N + kappa tau B)_x| v^3 <= J_x. Normal
+    acceleration and the chord limit are `limits.speed_limit`'s."""
+    v = _cbrt_limit(lim.jerk_mm_s3, f.kappa**2)
+    v = np.minimum(v, _cbrt_limit(lim.normal_jerk_mm_s3, np.hypot(f.dkappa_ds,
+                                                                  f.kappa * f.torsion)))
+    jerk_dir = (-(f.kappa**2)[:, None] * f.tangent + f.dkappa_ds[:, None] * f.normal
+                + (f.kappa * f.torsion)[:, None] * f.binormal)
+    with np.errstate(divide="ignore"):
+        for x in range(3):
+            tx = np.abs(f.tangent[:, x])
+            v = np.minimum(v, np.where(tx > 0.0, lim.axis_vel_mm_s[x] / np.where(tx > 0.0, tx, 1.0),
+                                       np.inf))
+            kn = f.kappa * np.abs(f.normal[:, x])
+            v = np.minimum(v, np.where(kn > 0.0, np.sqrt(lim.axis_acc_mm_s2[x]
+                                                         / np.where(kn > 0.0, kn, 1.0)), np.inf))
+            v = np.minimum(v, _cbrt_limit(lim.axis_jerk_mm_s3[x], np.abs(jerk_dir[:, x])))
+    return v
+
+
+def motion_ratio(f: Frames, v: np.ndarray, a: np.ndarray, j: np.ndarray,
+                 lim: Limits) -> np.ndarray:
+    """Per point (M,): the least lambda >= 0 such that the motion slowed by lambda keeps every
+    path-model limit there (<= 1: it holds as it is)."""
+    k = f.kappa
+    jt = j - k * k * v**3
+    jn = 3.0 * k * v * a + f.dkappa_ds * v**3
+    jb = k * f.torsion * v**3
+    ratio = np.maximum(np.sqrt(np.abs(a) / lim.acc_mm_s2),
+                       np.sqrt(k * v * v / lim.normal_acc_mm_s2))
+    ratio = np.maximum(ratio, np.cbrt(np.abs(jt) / lim.jerk_mm_s3))
+    ratio = np.maximum(ratio, np.cbrt(np.hypot(jn, jb) / lim.normal_jerk_mm_s3))
+    for x in range(3):
+        t_x, n_x, b_x = f.tangent[:, x], f.normal[:, x], f.binormal[:, x]
+        ratio = np.maximum(ratio, np.abs(v * t_x) / lim.axis_vel_mm_s[x])
+        ratio = np.maximum(ratio, np.sqrt(np.abs(a * t_x + k * v * v * n_x)
+                                          / lim.axis_acc_mm_s2[x]))
+        ratio = np.maximum(ratio, np.cbrt(np.abs(jt * t_x + jn * n_x + jb * b_x)
+                                          / lim.axis_jerk_mm_s3[x]))
+    return ratio
+
+
+def jump_limits(curve: NurbsCurve, u_breaks: np.ndarray, lim: Limits) -> np.ndarray:
+    """At interior knots u_breaks (K,): the speed at which the jump D of kappa N there, read
+    over one period as v^2 |D| / T, keeps J_n and every axis's jerk (inf where kappa N does
+    not jump). kappa N = (C'' |C'|^2 - (C' . C'') C') / |C'|^4 on each side; the left side is
+    the span before the knot, evaluated one ulp below it."""
+    if u_breaks.size == 0:
+        return np.empty(0)
+
+    def kappa_n(u: np.ndarray) -> np.ndarray:
+        c1, c2, _ = curve.derivatives3(u)
+        sp2 = _dot(c1, c1)
+        safe = np.where(sp2 > 0.0, sp2, 1.0)
+        return np.where((sp2 > 0.0)[:, None],
+                        (c2 * safe[:, None] - _dot(c1, c2)[:, None] * c1) / (safe**2)[:, None],
+                        0.0)
+
+    right = kappa_n(u_breaks)
+    left = kappa_n(np.nextafter(u_breaks, -np.inf))
+    jump = right - left
+    t = lim.period_s
+    with np.errstate(divide="ignore"):
+        size = np.sqrt(_dot(jump, jump))
+        # rounding noise where kappa N is continuous (a smooth knot) is no jump
+        size = np.where(size > JUMP_REL * np.sqrt(np.maximum(_dot(right, right),
+                                                             _dot(left, left))), size, 0.0)
+        jump = jump * (size > 0.0)[:, None]
+        v = np.where(size > 0.0, np.sqrt(lim.normal_jerk_mm_s3 * t / np.where(size > 0.0, size,
+                                                                              1.0)), np.inf)
+        for x in range(3):
+            d = np.abs(jump[:, x])
+            v = np.minimum(v, np.where(d > 0.0, np.sqrt(lim.axis_jerk_mm_s3[x] * t
+                                                        / np.where(d > 0.0, d, 1.0)), np.inf))
+    return v
