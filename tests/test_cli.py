@@ -186,8 +186,10 @@ BAD_PROFILES = [
     ("- 1\n- 2\n", "{p}: a machine profile is a mapping of keys to values, not list"),
     ("period_s: [1\n", "{p}:2:1: not valid YAML (expected ',' or ']', but got '<stream end>')"),
     ("{base}\nspeed: 3\n", "{p}:10:1: unknown key 'speed' (known keys: chord_error_mm, decimals, "
-     "feed_decimals, max_acc_mm_s2, max_curve_time_s, max_feed_mm_s, max_jerk_mm_s3, "
-     "max_normal_acc_mm_s2, max_normal_jerk_mm_s3, min_block_time_s, move_periods, "
+     "feed_decimals, jerk_model, max_acc_mm_s2, max_acc_x_mm_s2, max_acc_y_mm_s2, "
+     "max_acc_z_mm_s2, max_curve_time_s, max_feed_mm_s, max_jerk_mm_s3, max_jerk_x_mm_s3, "
+     "max_jerk_y_mm_s3, max_jerk_z_mm_s3, max_normal_acc_mm_s2, max_normal_jerk_mm_s3, "
+     "max_vel_x_mm_s, max_vel_y_mm_s, max_vel_z_mm_s, min_block_time_s, move_periods, "
      "period_s, rest_move_s)"),
     ("{base}\nchord_error_mm: .nan\n", "{p}:10:1: 'chord_error_mm' must be positive and finite, "
      "not nan"),

@@ -4,7 +4,7 @@
     python -m tests.bench.path_jerk --quick    # the short dense curves only
 
 Every curve of each file in samples/ and of tests/bench/dense_curves is planned under the
-`default` and `paper-table1` profiles, stepped with rk2c, and its interpolation points (full
+`default` and `paper-table1` profiles, and each again under `jerk_model: path`, stepped with rk2c, and its interpolation points (full
 precision, one period apart) are differenced (tests/motion_from_positions): the motion a
 controller executing them produces, not the planner's own v, a, j. The first table sets each
 path quantity against the profile's limit for it: tangential acceleration and jerk against A_t
@@ -36,6 +36,8 @@ from tests.motion_from_positions import path_motion
 
 ROOT = Path(__file__).resolve().parents[2]
 PROFILES = ("default", "paper-table1")
+# each profile again under the path jerk model (planning.path_model), named "<profile> path"
+PATH_MODEL = " path"
 
 
 @dataclass(frozen=True)
@@ -111,6 +113,8 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="the short dense curves only")
     args = parser.parse_args()
     machines = {name: load_machine(name) for name in PROFILES}
+    machines |= {name + PATH_MODEL: load_machine(name, {"jerk_model": "path"})
+                 for name in PROFILES}
     rows: list[tuple[str, str, Peaks]] = []
     if not args.quick:
         for path in sorted((ROOT / "samples").iterdir()):
