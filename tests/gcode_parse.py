@@ -8,6 +8,11 @@ import numpy as np
 
 WORD = re.compile(r"([A-Z])(-?\d*\.?\d*)")
 MOVE = re.compile(r"(G1 )?[XYZF]")
+# A move line as we write it ("G1 X1.5 Y-2. F300.", "X1.5", "F300."): read by one match, to the
+# same values as the words one by one (any other line takes the word by word path)
+_NUMBER = r"(-?(?:\d+\.?\d*|\.\d+))"
+PLAIN_MOVE = re.compile(rf"(?:G1 )?(?=[XYZF])(?:X{_NUMBER})?(?: ?Y{_NUMBER})?(?: ?Z{_NUMBER})?"
+                        rf"(?: ?F{_NUMBER})?")
 AXES = (("X", 0), ("Y", 1), ("Z", 2))
 
 
@@ -19,14 +24,26 @@ def moves(text: str, start) -> tuple[np.ndarray, np.ndarray, list[str]]:
     feed = np.nan
     points, feeds, raw = [], [], []
     for line in text.splitlines():
-        if not line or line.startswith("(") or not MOVE.match(line):
+        plain = PLAIN_MOVE.fullmatch(line)
+        if plain:
+            x, y, z, f = plain.groups()
+            if x is not None:
+                pos[0] = float(x)
+            if y is not None:
+                pos[1] = float(y)
+            if z is not None:
+                pos[2] = float(z)
+            if f is not None:
+                feed = float(f)
+        elif not line or line.startswith("(") or not MOVE.match(line):
             continue
-        words = dict(WORD.findall(line.replace("G1 ", "")))
-        for axis, i in AXES:
-            if axis in words:
-                pos[i] = float(words[axis])
-        if "F" in words:
-            feed = float(words["F"])
+        else:
+            words = dict(WORD.findall(line.replace("G1 ", "")))
+            for axis, i in AXES:
+                if axis in words:
+                    pos[i] = float(words[axis])
+            if "F" in words:
+                feed = float(words["F"])
         points.append(tuple(pos))
         feeds.append(feed)
         raw.append(line)

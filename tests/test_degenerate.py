@@ -112,7 +112,7 @@ def assert_rests_at(points: np.ndarray, u: np.ndarray, curve: NurbsCurve,
 def test_degenerate_case(name: str) -> None:
     curve = load(name)
     stops, length_mm = EXPECTED[name]
-    plan = plan_curve(curve, dataclasses.replace(load_machine("default").limits, feed_mm_s=100.0))
+    plan = plan_curve(curve, dataclasses.replace(DEFAULT, feed_mm_s=100.0))
     found = [(float(plan.key_u[k]), KIND_NAMES[int(plan.key_kind[k])])
              for k in range(plan.key_u.size) if plan.key_kind[k] in (KIND_CORNER, KIND_CUSP)]
     assert [kind for _, kind in found] == [kind for _, kind in stops]
@@ -190,7 +190,7 @@ def degenerate_curves(draw) -> NurbsCurve:
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
 @given(degenerate_curves(), st.sampled_from([20.0, 100.0, 200.0]))
 def test_random_degenerate_curves_move_on_the_curve_within_the_limits(curve, feed_mm_s) -> None:
-    lim = dataclasses.replace(load_machine("default").limits, feed_mm_s=feed_mm_s)
+    lim = dataclasses.replace(DEFAULT, feed_mm_s=feed_mm_s)
     plan = plan_curve(curve, lim)
     assume(plan.n_periods < 40_000)  # keep the example fast; long plans are no different
     result = interpolate(plan)
