@@ -160,17 +160,23 @@ def test_removable_zero_is_passed_at_speed() -> None:
     assert through.cycle_time_s == pytest.approx(line.cycle_time_s, abs=2 * DEFAULT.period_s)
 
 
+# the strategies drawn from, built once (hypothesis validates every new one at its first draw)
+DEGREES, DISTINCT_POINTS = st.integers(2, 4), st.integers(2, 6)
+COORDS = st.floats(-30, 30, allow_nan=False).map(lambda x: round(x, 3))
+COPIES = {degree: st.sampled_from([1, 1, 1, 2, degree, degree + 1]) for degree in (2, 3, 4)}
+WEIGHTS = st.sampled_from([1.0, 1.0, 0.5, 2.0, 0.2, 5.0])
+
+
 @st.composite
 def degenerate_curves(draw) -> NurbsCurve:
     """Curves of degree 2-4 with runs of repeated control points (up to degree + 1 copies, at
     the ends too), random weights, and knots of full multiplicity (corners) at random."""
-    degree = draw(st.integers(2, 4))
-    n_distinct = draw(st.integers(2, 6))
-    coords = st.floats(-30, 30, allow_nan=False).map(lambda x: round(x, 3))
-    distinct = [[draw(coords), draw(coords)] for _ in range(n_distinct)]
+    degree = draw(DEGREES)
+    n_distinct = draw(DISTINCT_POINTS)
+    distinct = [[draw(COORDS), draw(COORDS)] for _ in range(n_distinct)]
     points = []
     for p in distinct:
-        points.extend([p] * draw(st.sampled_from([1, 1, 1, 2, degree, degree + 1])))
+        points.extend([p] * draw(COPIES[degree]))
     if len(points) < degree + 1:
         points.extend([distinct[-1]] * (degree + 1 - len(points)))
     n = len(points)
@@ -180,7 +186,7 @@ def degenerate_curves(draw) -> NurbsCurve:
         if len(set(inner[i:i + degree])) == 1 and i + degree < len(inner):
             assume(inner[i + degree] != inner[i])
     knots = [0] * (degree + 1) + [k / 20 for k in inner] + [1] * (degree + 1)
-    weights = [draw(st.sampled_from([1.0, 1.0, 0.5, 2.0, 0.2, 5.0])) for _ in range(n)]
+    weights = [draw(WEIGHTS) for _ in range(n)]
     curve = NurbsCurve.build(degree, knots, points, weights)
     assume(not curve.is_degenerate)
     return curve
