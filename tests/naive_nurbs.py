@@ -18,9 +18,13 @@ def _ratio(num: float, den: float) -> float:
     return 0.0 if den == 0.0 else num / den
 
 
-def basis(i: int, p: int, u: float, knots: np.ndarray) -> float:
+def basis(i: int, p: int, u: float | np.ndarray, knots: np.ndarray) -> float | np.ndarray:
+    """N_{i,p}(u); for an array of u, elementwise (the same operations, the same values)."""
     if p == 0:
         last = knots[-1]
+        if isinstance(u, np.ndarray):
+            return 1.0 * ((knots[i] <= u) & (u < knots[i + 1])
+                          | (u == last) & (knots[i] < knots[i + 1] == last))
         if knots[i] <= u < knots[i + 1]:
             return 1.0
         # the right end belongs to the last non-empty span

@@ -112,7 +112,7 @@ def assert_rests_at(points: np.ndarray, u: np.ndarray, curve: NurbsCurve,
 def test_degenerate_case(name: str) -> None:
     curve = load(name)
     stops, length_mm = EXPECTED[name]
-    plan = plan_curve(curve, dataclasses.replace(load_machine("default").limits, feed_mm_s=100.0))
+    plan = plan_curve(curve, dataclasses.replace(DEFAULT, feed_mm_s=100.0))
     found = [(float(plan.key_u[k]), KIND_NAMES[int(plan.key_kind[k])])
              for k in range(plan.key_u.size) if plan.key_kind[k] in (KIND_CORNER, KIND_CUSP)]
     assert [kind for _, kind in found] == [kind for _, kind in stops]
@@ -160,17 +160,23 @@ def test_removable_zero_is_passed_at_speed() -> None:
     assert through.cycle_time_s == pytest.approx(line.cycle_time_s, abs=2 * DEFAULT.period_s)
 
 
+# the strategies drawn from, built once (hypothesis validates every new one at its first draw)
+DEGREES, DISTINCT_POINTS = st.integers(2, 4), st.integers(2, 6)
+COORDS = st.floats(-30, 30, allow_nan=False).map(lambda x: round(x, 3))
+COPIES = {degree: st.sampled_from([1, 1, 1, 2, degree, degree + 1]) for degree in (2, 3, 4)}
+WEIGHTS = st.sampled_from([1.0, 1.0, 0.5, 2.0, 0.2, 5.0])
+
+
 @st.composite
 def degenerate_curves(draw) -> NurbsCurve:
     """Curves of degree 2-4 with runs of repeated control points (up to degree + 1 copies, at
     the ends too), random weights, and knots of full multiplicity (corners) at random."""
-    degree = draw(st.integers(2, 4))
-    n_distinct = draw(st.integers(2, 6))
-    coords = st.floats(-30, 30, allow_nan=False).map(lambda x: round(x, 3))
-    distinct = [[draw(coords), draw(coords)] for _ in range(n_distinct)]
+    degree = draw(DEGREES)
+    n_distinct = draw(DISTINCT_POINTS)
+    distinct = [[draw(COORDS), draw(COORDS)] for _ in range(n_distinct)]
     points = []
     for p in distinct:
-        points.extend([p] * draw(st.sampled_from([1, 1, 1, 2, degree, degree + 1])))
+        points.extend([p] * draw(COPIES[degree]))
     if len(points) < degree + 1:
         points.extend([distinct[-1]] * (degree + 1 - len(points)))
     n = len(points)
@@ -180,7 +186,7 @@ def degenerate_curves(draw) -> NurbsCurve:
         if len(set(inner[i:i + degree])) == 1 and i + degree < len(inner):
             assume(inner[i + degree] != inner[i])
     knots = [0] * (degree + 1) + [k / 20 for k in inner] + [1] * (degree + 1)
-    weights = [draw(st.sampled_from([1.0, 1.0, 0.5, 2.0, 0.2, 5.0])) for _ in range(n)]
+    weights = [draw(WEIGHTS) for _ in range(n)]
     curve = NurbsCurve.build(degree, knots, points, weights)
     assume(not curve.is_degenerate)
     return curve
@@ -190,7 +196,7 @@ def degenerate_curves(draw) -> NurbsCurve:
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
 @given(degenerate_curves(), st.sampled_from([20.0, 100.0, 200.0]))
 def test_random_degenerate_curves_move_on_the_curve_within_the_limits(curve, feed_mm_s) -> None:
-    lim = dataclasses.replace(load_machine("default").limits, feed_mm_s=feed_mm_s)
+    lim = dataclasses.replace(DEFAULT, feed_mm_s=feed_mm_s)
     plan = plan_curve(curve, lim)
     assume(plan.n_periods < 40_000)  # keep the example fast; long plans are no different
     result = interpolate(plan)

@@ -729,13 +729,21 @@ NUMBER_EDGES = ["0", "-0", "+0", "-0.0", "0.", "-0.", ".5", "-.5", "+.5", "5.", 
                 "-123.456789012345", "0000000000000000000000000001.5", "4503599627370497.5"]
 
 
+# the strategies drawn from, built once: hypothesis validates every new one at its first draw,
+# and a number is drawn thousands of times a run
+SIGNS = st.sampled_from(["", "+", "-"])
+WHOLES = st.text("0123456789", max_size=20)
+FRACTIONS = {True: st.text("0123456789", max_size=25),  # after a whole part
+             False: st.text("0123456789", min_size=1, max_size=25)}
+
+
 @st.composite
 def plain_numbers(draw: st.DrawFn) -> str:
     """`[+-]?(\\d+(\\.\\d*)?|\\.\\d+)` with up to 20 digits each side, leading zeros included."""
-    sign = draw(st.sampled_from(["", "+", "-"]))
-    whole = draw(st.text("0123456789", max_size=20))
+    sign = draw(SIGNS)
+    whole = draw(WHOLES)
     point = draw(st.booleans()) or not whole
-    fraction = draw(st.text("0123456789", min_size=0 if whole else 1, max_size=25))
+    fraction = draw(FRACTIONS[bool(whole)])
     return sign + whole + ("." + fraction if point else "")
 
 
@@ -773,17 +781,26 @@ def test_scan_numbers_are_float_s_seeded() -> None:
         check_number(number)
 
 
+LETTER_ORDERS = st.sampled_from(["KXYZ", "KXYZR", "KXYZR", "KXY", "KXYZF", "XKYZ"])
+ONE_IN_16 = st.integers(0, 15)
+OTHER_LETTERS = st.sampled_from("KXYZRFG")
+EITHER_CASE = {letter: st.sampled_from([letter, letter.lower()]) for letter in "KXYZRFG"}
+NUMBERS = plain_numbers()
+SEPARATORS = st.sampled_from([" "] * 12 + ["", "  ", "\t", "\r"])
+ENDINGS = st.sampled_from(["\n", "\r\n", "", "\r", " \n", "\n\r", "\r\r\n"])
+
+
 @st.composite
 def point_line_texts(draw: st.DrawFn) -> str:
     """Lines near the point-line grammar: its words, letters, separators and endings, varied."""
     words = []
-    for letter in draw(st.sampled_from(["KXYZ", "KXYZR", "KXYZR", "KXY", "KXYZF", "XKYZ"])):
-        if draw(st.integers(0, 15)) == 0:
-            letter = draw(st.sampled_from("KXYZRFG"))
-        words.append(draw(st.sampled_from([letter, letter.lower()])) + draw(plain_numbers()))
-    seps = [draw(st.sampled_from([" "] * 12 + ["", "  ", "\t", "\r"])) for _ in words[1:]]
+    for letter in draw(LETTER_ORDERS):
+        if draw(ONE_IN_16) == 0:
+            letter = draw(OTHER_LETTERS)
+        words.append(draw(EITHER_CASE[letter]) + draw(NUMBERS))
+    seps = [draw(SEPARATORS) for _ in words[1:]]
     line = words[0] + "".join(sep + word for sep, word in zip(seps, words[1:]))
-    return line + draw(st.sampled_from(["\n", "\r\n", "", "\r", " \n", "\n\r", "\r\r\n"]))
+    return line + draw(ENDINGS)
 
 
 @settings(max_examples=examples(2000), deadline=None)

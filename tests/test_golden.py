@@ -48,7 +48,9 @@ COMMENT = re.compile(r"\(nurbsfeed: curve 0 .*, (\d+) points, period 1 ms, rk2c,
                      r"length ([\d.]+) (mm|in), planned cycle ([\d.]+) s\)")
 MOVE = re.compile(r"(G1 )?(X-?\d*\.\d*)? ?(Y-?\d*\.\d*)? ?(Z-?\d*\.\d*)? ?(F\d*\.\d*)?")
 CURVE_SAMPLES = 4 * 8_000  # of the naive curve, evenly in u (its sag is checked to be small)
-WINDOW, WINDOW_BACK = 1000, 20  # segments searched for a move's nearest (a move spans < 100)
+# segments searched for a move's nearest (a move spans 30 at most): a window too narrow
+# only finds a farther segment, never a nearer one, so it cannot hide a point off the curve
+WINDOW, WINDOW_BACK = 200, 20
 
 
 @dataclass(frozen=True)
@@ -87,36 +89,33 @@ PROFILES = ("default", "paper-table1")
 
 @functools.cache
 def polyline(name: str) -> np.ndarray:
-    """(CURVE_SAMPLES + 1, 3) points of the naive curve, evenly in u."""
+    """(CURVE_SAMPLES + 1, 3) points of the naive curve, evenly in u: C(u) by Cox-de Boor from
+    the definition (tests/naive_nurbs.basis), all samples at once."""
     case = CASES[name]
-    return np.array([naive_point(case, u)
-                     for u in np.linspace(case.knots[0], case.knots[-1], CURVE_SAMPLES + 1)])
-
-
-def naive_point(case: Case, u: float) -> np.ndarray:
-    """C(u) by Cox-de Boor from the definition (tests/naive_nurbs.basis)."""
+    u = np.linspace(case.knots[0], case.knots[-1], CURVE_SAMPLES + 1)
     knots = np.array(case.knots, dtype=float)
-    num, den = np.zeros(3), 0.0
+    num, den = np.zeros((u.size, 3)), np.zeros(u.size)
     for i, (point, weight) in enumerate(zip(case.points, case.weights)):
         n = naive_nurbs.basis(i, case.degree, u, knots) * weight
-        num += n * np.array(point, dtype=float)
+        num += n[:, None] * np.array(point, dtype=float)
         den += n
-    return num / den
+    return num / den[:, None]
 
 
 def distance_to_polyline(points: np.ndarray, polyline: np.ndarray) -> np.ndarray:
     """Each point's (M, 3) distance to the polyline (S, 3) through the curve's samples, both in
     order along the curve: each point is compared with the segments from a little before the
     previous point's nearest on. (A point farther along would only be found farther away.)"""
-    a, b = polyline[:-1], polyline[1:]
+    a = polyline[:-1]
+    ab = polyline[1:] - a
+    ab_ab = np.einsum("ij,ij->i", ab, ab)
     out = np.empty(len(points))
     nearest = 0
     for k, p in enumerate(points):
         lo = max(nearest - WINDOW_BACK, 0)
-        sa, sb = a[lo:lo + WINDOW], b[lo:lo + WINDOW]
-        ab = sb - sa
-        t = np.clip(np.einsum("ij,ij->i", p - sa, ab) / np.einsum("ij,ij->i", ab, ab), 0, 1)
-        gap = np.linalg.norm(sa + t[:, None] * ab - p, axis=1)
+        sa, sab = a[lo:lo + WINDOW], ab[lo:lo + WINDOW]
+        t = np.clip(np.einsum("ij,ij->i", p - sa, sab) / ab_ab[lo:lo + WINDOW], 0, 1)
+        gap = np.linalg.norm(sa + t[:, None] * sab - p, axis=1)
         nearest = lo + int(np.argmin(gap))
         out[k] = gap[nearest - lo]
     return out

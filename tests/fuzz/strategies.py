@@ -9,6 +9,7 @@ line endings, stray bytes. A case is `Case`.
 
 from __future__ import annotations
 
+import functools
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,6 +39,7 @@ ODD_NUMBERS = ["5", "5.", ".5", "+5", "-.5", "-0.", "+.0", "1e3", "1E-3", "0x10"
                "\u0665", "5\uff0e", "nan", "inf", "", " ", "\t5", "5 .5", "1_000"]
 
 
+@functools.cache  # one strategy per range: hypothesis validates each new one
 def numbers(low: float, high: float) -> st.SearchStrategy[str]:
     """A value in [low, high] written as people write it: 5. 5.0 .5 +5 5 05.000"""
     def spell(value: float, style: int) -> str:
