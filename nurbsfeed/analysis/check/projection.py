@@ -126,9 +126,10 @@ def _project_kernel(knots, cw, degree, targets, u_first, u_last, back_mm, accept
     (rounding may put a point slightly behind the one before), by steps that double up to
     PROJECT_STEP_MAX_REL of the knot range and cover at most PROJECT_STEP_ARC_SHARE of the
     distance to P (and back_mm). Its candidates are the local minima of |C(u) - P|: the origin
-    where the distance grows there; each step over which g(u) = C'(u).(C(u) - P) turns positive,
-    bisected; each step that ends farther than it began without g turning (it ends on a stop),
-    by golden section; and the curve end where the distance still falls there.
+    where the distance grows there; each step over which g(u) = C'(u).(C(u) - P) turns positive
+    (at a step's end on a corner, with C' of the leg it arrives by), bisected; each step that
+    ends farther than it began without g turning (it ends on a stop), by golden section; and the
+    curve end where the distance still falls there.
 
     Where C' = 0 (a corner, a cusp or reversal, a zero-length span of coincident control points)
     g = 0 too, but the distance need not be least there: the curve stops and goes on. So only g
