@@ -38,7 +38,8 @@ AROUND_THE_CORNER = np.array([[38.100254, 56.311292, 20.9804], [38.1, 56.311546,
                               [38.1, 56.311546, 20.979892]])
 
 
-@pytest.mark.parametrize("name", ["corner-tangential-jerk.ngc", "inch-path-deviation.ngc"])
+@pytest.mark.parametrize("name", ["corner-tangential-jerk.ngc", "inch-path-deviation.ngc",
+                                  "inch-turn-back-jerk.json"])
 def test_a_program_with_a_corner_converted_passes_check(tmp_path: Path, name: str) -> None:
     machine = load_machine("default")
     target = tmp_path / "out.nc"
@@ -188,3 +189,61 @@ def test_the_nearest_point_beside_a_corner_knot_is_found_on_either_leg() -> None
     assert on_leg < to_segment(written, corner, after) - 1e-6
     _, nearest = nearest_on_curve(curve, written[None, :])
     assert nearest[0] == pytest.approx(on_leg, abs=1e-12)
+
+
+TURN_BACK = CASES / "inch-turn-back-jerk.json"
+TURN_BACK_KNOT = 2.5e-7  # its corner: the path turns back 167 degrees, its legs 13 degrees apart
+R6_MM = 0.5e-6 * 25.4 * np.sqrt(3.0)  # output rounding at 6 decimals of an inch
+
+
+def _segment_mm(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    t = np.clip(np.dot(p - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
+    return float(np.linalg.norm(p - (a + t * (b - a))))
+
+
+def test_the_point_before_a_turn_back_corner_is_measured_on_the_leg_before() -> None:
+    """Fuzzer find (json-2901100-390, reduced to data/check-corners/inch-turn-back-jerk.json):
+    the point written 1 ms before the rest at a 167-degree polyline corner is 0.58 r from the
+    leg before the corner and 0.54 r from the leg after it. The walk's step ended on the corner
+    knot, where the curve's derivative is the leg after's: the distance fell along it, so the
+    foot just before the knot went unseen and the point was measured on the leg after, its arc
+    1.4e-4 mm ahead (tangential jerk 55,628 > 50,000 + 2,750; the written points measured on
+    the legs they were stepped on: 49,338). Distances to the straight legs are the oracle."""
+    raw = json.loads(TURN_BACK.read_text())["curves"][0]
+    inch = np.array(raw["control_points"])
+    curve = NurbsCurve.build(raw["degree"], raw["knots"], inch * 25.4, None)
+    start, corner, end = inch * 25.4
+    # written (inch): two on the way in, the corner, two on the way out
+    written = np.array([[0.498994, 1.150995, -0.000004], [0.498998, 1.150998, -0.000001],
+                        [0.499, 1.151, 0.0], [0.498999, 1.150998, -0.000001],
+                        [0.498995, 1.150993, -0.000003]]) * 25.4
+    assert _segment_mm(written[1], corner, end) < _segment_mm(written[1], start, corner) < R6_MM
+    foot, dist = project_points(curve, written, 2.0 * R6_MM, R6_MM, 10.0 * R6_MM)
+    assert foot[0] < foot[1] < TURN_BACK_KNOT < foot[3] < foot[4]
+    assert foot[2] == pytest.approx(TURN_BACK_KNOT, abs=1e-10)
+    legs = [(start, corner)] * 2 + [(corner, end)] * 3
+    assert dist == pytest.approx([_segment_mm(p, *leg) for p, leg in zip(written, legs)],
+                                 rel=1e-6, abs=1e-11)
+
+
+def test_a_point_out_of_time_before_a_turn_back_corner_is_still_caught(tmp_path: Path) -> None:
+    """The point before the corner, moved 2e-5 in (5.1e-4 mm) back along the leg it is on, F
+    words set so that each move still takes its period: the motion would cover 0.6 um in the
+    last 1 ms before its rest, and measured on that leg the tangential jerk is broken."""
+    machine = load_machine("default")
+    target = tmp_path / "out.nc"
+    convert_file(TURN_BACK, target, machine)
+    lines = target.read_text().splitlines(keepends=True)
+    at_corner = lines.index("X0.499 Y1.151 Z0. F0.18\n")
+    points = [np.array([float(v) for v in re.findall(r"[XYZ](-?[\d.]+)", lines[k])])
+              for k in (at_corner - 2, at_corner - 1, at_corner)]
+    start, corner, _ = np.array(json.loads(TURN_BACK.read_text())["curves"][0]["control_points"])
+    leg_in = corner - start
+    moved = np.round(points[1] - 2e-5 * leg_in / np.linalg.norm(leg_in), 6)
+    per_min = 60.0 / machine.limits.period_s  # inch/min of a move of 1 inch in one period
+    lines[at_corner - 1] = ("X{:.6f} Y{:.6f} Z{:.6f}".format(*moved)
+                            + f" F{per_min * np.linalg.norm(moved - points[0]):.5f}\n")
+    lines[at_corner] = f"X0.499 Y1.151 Z0. F{per_min * np.linalg.norm(points[2] - moved):.5f}\n"
+    target.write_text("".join(lines))
+    report = check_files(TURN_BACK, target, machine)
+    assert {v.check for v in report.violations} == {"tangential-jerk"}, report.violations

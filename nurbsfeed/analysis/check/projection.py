@@ -45,6 +45,16 @@ def _distance2(knots, cw, degree, n_ctrl, u, span, tx, ty, tz, basis, dbasis, le
 
 
 @jit
+def _growing(p, d, tx, ty, tz):
+    """Whether |C - P| grows along C' (p: C (3,), d: C' (3,)): g = C'.(C - P) above its
+    rounding noise."""
+    g = d[0] * (p[0] - tx) + d[1] * (p[1] - ty) + d[2] * (p[2] - tz)
+    scale = abs(p[0]) + abs(p[1]) + abs(p[2]) + abs(tx) + abs(ty) + abs(tz)
+    noise = PROJECT_G_NOISE_EPS * EPS * math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) * scale
+    return g > noise
+
+
+@jit
 def _probe(knots, cw, degree, n_ctrl, u, span, tx, ty, tz, basis, dbasis, left, right, p, d):
     """Whether |C(u) - P| grows at u, and its square. Growing: g(u) = C'(u).(C(u) - P) above
     its rounding noise. Where C' = 0 the curve stops and goes on; near a stop g is lost in the
@@ -52,10 +62,7 @@ def _probe(knots, cw, degree, n_ctrl, u, span, tx, ty, tz, basis, dbasis, left, 
     p."""
     span = find_span(knots, degree, n_ctrl, u, span)
     eval_d1(knots, cw, degree, u, span, basis, dbasis, left, right, p, d)
-    g = d[0] * (p[0] - tx) + d[1] * (p[1] - ty) + d[2] * (p[2] - tz)
-    scale = abs(p[0]) + abs(p[1]) + abs(p[2]) + abs(tx) + abs(ty) + abs(tz)
-    noise = PROJECT_G_NOISE_EPS * EPS * math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) * scale
-    return g > noise, (tx - p[0]) ** 2 + (ty - p[1]) ** 2 + (tz - p[2]) ** 2, span
+    return _growing(p, d, tx, ty, tz), (tx - p[0]) ** 2 + (ty - p[1]) ** 2 + (tz - p[2]) ** 2, span
 
 
 @jit
@@ -119,9 +126,10 @@ def _project_kernel(knots, cw, degree, targets, u_first, u_last, back_mm, accept
     (rounding may put a point slightly behind the one before), by steps that double up to
     PROJECT_STEP_MAX_REL of the knot range and cover at most PROJECT_STEP_ARC_SHARE of the
     distance to P (and back_mm). Its candidates are the local minima of |C(u) - P|: the origin
-    where the distance grows there; each step over which g(u) = C'(u).(C(u) - P) turns positive,
-    bisected; each step that ends farther than it began without g turning (it ends on a stop),
-    by golden section; and the curve end where the distance still falls there.
+    where the distance grows there; each step over which g(u) = C'(u).(C(u) - P) turns positive
+    (at a step's end on a corner, with C' of the leg it arrives by), bisected; each step that
+    ends farther than it began without g turning (it ends on a stop), by golden section; and the
+    curve end where the distance still falls there.
 
     Where C' = 0 (a corner, a cusp or reversal, a zero-length span of coincident control points)
     g = 0 too, but the distance need not be least there: the curve stops and goes on. So only g
@@ -226,7 +234,15 @@ def _project_kernel(knots, cw, degree, targets, u_first, u_last, back_mm, accept
                 wx = p[0]
                 wy = p[1]
                 wz = p[2]
-                if rising and not rising_lo:
+                arriving = rising
+                if corner_after and hi == knot_after:
+                    # the step arrives at the corner along the leg before it, and the knot's
+                    # own span is the leg after: where that leg turns back past the point, the
+                    # distance falls along it while it grows along the leg the step came by, so
+                    # a foot just before the corner is seen only by the leg before's C'
+                    eval_d1(knots, cw, degree, hi, before, basis, dbasis, left, right, p, d)
+                    arriving = rising or _growing(p, d, tx, ty, tz)
+                if arriving and not rising_lo:
                     a = lo
                     b = hi
                     for _ in range(PROJECT_ITERATIONS):
