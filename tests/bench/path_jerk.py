@@ -4,9 +4,10 @@
     python -m tests.bench.path_jerk --quick    # the short dense curves only
 
 Every curve of each file in samples/ and of tests/bench/dense_curves is planned under the
-`default` and `paper-table1` profiles, and each again under `jerk_model: path`, stepped with rk2c, and its interpolation points (full
-precision, one period apart) are differenced (tests/motion_from_positions): the motion a
-controller executing them produces, not the planner's own v, a, j. The first table sets each
+`default` and `paper-table1` profiles, and each again under `jerk_model: path`, stepped with
+rk2c, and its interpolation points (full precision, one period apart) are differenced
+(tests/motion_from_positions): the motion a controller executing them produces, not the
+planner's own v, a, j. The first table sets each
 path quantity against the profile's limit for it: tangential acceleration and jerk against A_t
 and J_t, normal acceleration against A_n, the part of the jerk vector across the path against
 J_n (the planner limits the proxy v^3 kappa^2 instead), and the jerk vector's norm against
