@@ -48,15 +48,17 @@ def test_the_largest_parameter_number_and_leading_zeros_are_read(tmp_path: Path)
 
 def test_a_bug_while_loading_a_profile_is_one_line_not_a_traceback(tmp_path: Path) -> None:
     """A 400-digit integer in a profile raised OverflowError in the profile check, outside any
-    conversion: the traceback reached the user (tests/fuzz/findings/profile-huge-integer.yaml;
-    the profile loader should refuse it at its line; until then it is an internal error)."""
-    profile = Path(__file__).parent / "fuzz" / "findings" / "profile-huge-integer.yaml"
+    conversion: the traceback reached the user (a fuzz find). It is refused at its line."""
+    profile = tmp_path / "huge.yaml"
+    default = (Path(__file__).parents[1] / "configs" / "default.yaml").read_text()
+    profile.write_text(default.replace("max_feed_mm_s: 200.0", "max_feed_mm_s: " + "9" * 400))
     source = tmp_path / "in.ngc"
     source.write_text("G17 G21 G0 X0 Y0\nM2\n")
     result = CliRunner().invoke(main, ["convert", str(source), "-m", str(profile), "-o",
                                        str(tmp_path / "out.nc")])
     assert result.exit_code == 2
     assert "Traceback" not in result.stderr and result.stderr.count("\n") == 1, result.stderr
+    assert result.stderr.startswith(f"{profile}:3:"), result.stderr
     assert not (tmp_path / "out.nc").exists()
 
 
