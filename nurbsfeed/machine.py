@@ -56,16 +56,16 @@ LIMIT_KEYS = {"period_s": "period_s", "max_feed_mm_s": "feed_mm_s",
 REQUIRED_KEYS = tuple(LIMIT_KEYS)  # the others have the Machine's default (decimals: auto)
 AXES = ("x", "y", "z")
 # per-axis limits (path model only): key -> (Limits field, axis index)
+# per-axis kind: key word, unit, Limits field, the path key whose range it shares
+AXIS_KINDS = (("vel", "mm_s", "axis_vel_mm_s", "max_feed_mm_s"),
+              ("acc", "mm_s2", "axis_acc_mm_s2", "max_acc_mm_s2"),
+              ("jerk", "mm_s3", "axis_jerk_mm_s3", "max_jerk_mm_s3"))
 AXIS_KEYS = {f"max_{what}_{axis}_{unit}": (field, i)
-             for what, unit, field in (("vel", "mm_s", "axis_vel_mm_s"),
-                                       ("acc", "mm_s2", "axis_acc_mm_s2"),
-                                       ("jerk", "mm_s3", "axis_jerk_mm_s3"))
-             for i, axis in enumerate(AXES)}
+             for what, unit, field, _ in AXIS_KINDS for i, axis in enumerate(AXES)}
 FLOAT_KEYS = (REQUIRED_KEYS + ("max_curve_time_s", "min_block_time_s", "rest_move_s")
               + tuple(AXIS_KEYS))
 INT_KEYS = ("decimals", "feed_decimals", "move_periods")
 JERK_MODELS = ("paper", "path")  # profile key jerk_model (planning.path_model)
-RANGES_OF_AXIS = {"vel": (1e-3, 1e5), "acc": (1e-3, 1e7), "jerk": (1e-3, 1e10)}
 # The accepted values, ends included (README "Profile keys" says why each is physical).
 RANGES: dict[str, tuple[float, float]] = {
     "period_s": (1e-6, 1.0),
@@ -81,8 +81,9 @@ RANGES: dict[str, tuple[float, float]] = {
     "decimals": (0, 8),
     "feed_decimals": (0, 6),
     "move_periods": (1, 1000),
-    **{key: RANGES_OF_AXIS[key.split("_")[1]] for key in AXIS_KEYS},
 }
+RANGES.update({f"max_{what}_{axis}_{unit}": RANGES[path_key]
+               for what, unit, _, path_key in AXIS_KINDS for axis in AXES})
 MAX_MOVE_S = RANGES["period_s"][1]
 # a move this much (relative) shorter than min_block_time_s still meets it: 2 x 0.00051 is not
 # 0.00102 in binary

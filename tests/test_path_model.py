@@ -18,6 +18,7 @@ from nurbsfeed.machine import load_machine, machine_from_mapping
 from nurbsfeed.pipeline import plan_block
 from nurbsfeed.planning.path_model import frames, jump_limits, motion_ratio
 from nurbsfeed.planning.planner import plan_curve
+from nurbsfeed.readers.json_curves import read_json_curves
 from tests.bench.dense_curves import dense_curves
 from tests.motion_from_positions import path_motion
 
@@ -174,8 +175,7 @@ def test_dense_curves_keep_every_path_limit_measured_from_their_points(curve: Nu
 def test_the_paper_model_is_still_the_papers() -> None:
     """paper-table1 plans the butterfly as before (Table 2's 6.747 s): the path model changes
     nothing unless a profile asks for it, and under it the butterfly runs slower, not faster."""
-    _, [(curve, _)] = __import__("nurbsfeed.readers.json_curves", fromlist=["x"]) \
-        .read_json_curves(ROOT / "samples" / "butterfly.json")
+    _, [(curve, _)] = read_json_curves(ROOT / "samples" / "butterfly.json")
     paper = plan_curve(curve, load_machine("paper-table1").limits)
     assert paper.cycle_time_s == pytest.approx(6.747, abs=5e-4)
     path = plan_curve(curve, machine_from_mapping(PAPER_LIMITS | {"jerk_model": "path"},

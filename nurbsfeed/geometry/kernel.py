@@ -282,7 +282,9 @@ def point_d3(knots, coef, degree, span, u):
     """C(u) and its first three derivatives on `span`: twelve floats, C first.
 
     `point_d2` carried one order further, for the path model's dkappa/ds and torsion:
-    C3 = (A3 - 3 W1 C2 - 3 W2 C1 - W3 C) / W, the k in Ak and Wk the order of the derivative."""
+    C3 = (A3 - 3 W1 C2 - 3 W2 C1 - W3 C) / W, the k in Ak and Wk the order of the derivative.
+    A copy, neither calling `point_d2` nor called by it, for `point_d1`'s reason: the grid's
+    loops call `point_d2` millions of times and would pay for C3 there."""
     side, t = _expansion(knots, span, u)
     ax = coef[span, side, degree, 0]
     ay = coef[span, side, degree, 1]

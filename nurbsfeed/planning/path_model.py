@@ -159,7 +159,7 @@ def jump_limits(curve: NurbsCurve, u_breaks: np.ndarray, lim: Limits) -> np.ndar
         return np.empty(0)
 
     def kappa_n(u: np.ndarray) -> np.ndarray:
-        c1, c2, _ = curve.derivatives3(u)
+        _, c1, c2 = curve.derivatives(u)
         sp2 = _dot(c1, c1)
         safe = np.where(sp2 > 0.0, sp2, 1.0)
         return np.where((sp2 > 0.0)[:, None],

@@ -461,19 +461,6 @@ PATH_SAMPLES_PER_PERIOD = 2  # the path model's final check samples the law this
 PATH_CHUNK = 1 << 16  # samples per chunk of that check: memory stays bounded on long curves
 
 
-def _path_samples(curve: NurbsCurve, grid: Grid, law: TimeLaw, lim: Limits):
-    """Chunks (s, v, motion ratio) of the law sampled PATH_SAMPLES_PER_PERIOD times a period."""
-    if law.duration_s <= 0.0:
-        return
-    n = max(2, int(math.ceil(law.duration_s / lim.period_s * PATH_SAMPLES_PER_PERIOD)) + 1)
-    for start in range(0, n, PATH_CHUNK):
-        t = np.arange(start, min(n, start + PATH_CHUNK)) * (law.duration_s / (n - 1))
-        piece, local, v, a, j = law.sample(t)
-        s = law.s0_mm[piece] + local
-        u = np.interp(s, grid.s_mm, grid.u)
-        yield s, v, motion_ratio(frames(curve, u), v, a, j, lim)
-
-
 def path_slowdown(curve: NurbsCurve, grid: Grid, law: TimeLaw, lim: Limits) -> float:
     """The uniform slowdown (>= 1) that keeps every path-model limit where the law goes: the
     law sampled PATH_SAMPLES_PER_PERIOD times a period, each sample's parameter found from its
@@ -481,8 +468,14 @@ def path_slowdown(curve: NurbsCurve, grid: Grid, law: TimeLaw, lim: Limits) -> f
     rounds keep the static terms; this covers what the S-curve's own acceleration and jerk add
     (3 kappa v a across the path, -kappa^2 v^3 + j along it, a T_x per axis)."""
     worst = 1.0
-    for _, _, ratio in _path_samples(curve, grid, law, lim):
-        worst = max(worst, float(np.max(ratio)))
+    if law.duration_s <= 0.0:
+        return worst
+    n = max(2, int(math.ceil(law.duration_s / lim.period_s * PATH_SAMPLES_PER_PERIOD)) + 1)
+    for start in range(0, n, PATH_CHUNK):
+        t = np.arange(start, min(n, start + PATH_CHUNK)) * (law.duration_s / (n - 1))
+        piece, local, v, a, j = law.sample(t)
+        u = np.interp(law.s0_mm[piece] + local, grid.s_mm, grid.u)
+        worst = max(worst, float(np.max(motion_ratio(frames(curve, u), v, a, j, lim))))
     return worst
 
 
