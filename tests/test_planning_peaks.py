@@ -105,3 +105,72 @@ def test_a_peak_between_two_nodes_keeps_the_limit_at_every_point() -> None:
     assert plan.piece_scale.size == 1  # rest to rest: the law runs at v / piece_scale
     v = plan.law.sample(np.arange(0.0, plan.law.duration_s, 1e-4))[1] / plan.piece_scale[0]
     assert v.max() <= np.sqrt(lim.normal_acc_mm_s2 / 0.1) * (1 + LIMIT_REL), v.max()
+
+
+# tests/data/peaks/hairpin-needle.ngc, its second curve (fuzz seed 30, case gcode-3000111-507):
+# the control points (0, 0.5), (0, 1.736), (0, 0.5) make the path turn back in a hairpin whose
+# |C'| dips to 0.004 (of a mean ~10) without reaching 0, so kappa peaks at 2.4e7 1/mm in a
+# needle ~1e-5 wide in u. The samples either side had 3,777 and 6,087, sampling their bracket
+# stepped over the needle, and the plan passed the hairpin at 0.11 mm/s: the velocity reversed
+# within one period (a jerk vector of 133,000 mm/s^3 from the full-precision positions).
+HAIRPIN = NurbsCurve.build(
+    4, [0, 0, 0, 0, 0, 1, 1, 1, 6, 7, 7, 7, 7, 7],
+    [[1, 2, 0], [0, 0, 0], [0, 0.5, 0], [0, 1.736, 0], [0, 0.5, 0], [1, 0, 0], [3.417, 0, 0],
+     [2.284, 5, 0], [0, 0, 0]],
+    [1, 0.5, 0.5, 1, 0.5, 1, 1, 1, 1])
+
+
+def hairpin_peak() -> tuple[float, float]:
+    """The needle's u and kappa by dense sampling (2e5 points over the 2e-3 of u around the
+    hairpin, ~150 across the needle's half width), refined by a second pass around the best."""
+    u = np.linspace(0.94 / 7, 0.96 / 7, 200_001)
+    best = u[np.argmax(kappa_at(HAIRPIN, u))]
+    u = np.linspace(best - 2e-7, best + 2e-7, 4001)
+    k = kappa_at(HAIRPIN, u)
+    return float(u[np.argmax(k)]), float(k.max())
+
+
+def test_a_near_cusp_needle_is_a_peak_node() -> None:
+    u_peak, k_peak = hairpin_peak()
+    assert k_peak > 1e7  # the needle is there
+    grid = plan_curve(HAIRPIN, load_machine("default").limits).grid
+    peaks = grid.peak_index
+    nearest = peaks[np.argmin(np.abs(grid.u[peaks] - u_peak))]
+    assert grid.kappa_1_mm[nearest] >= k_peak * (1 - 1e-6), (grid.kappa_1_mm[nearest], k_peak)
+
+
+def test_the_hairpin_is_a_key_point_planned_under_its_normal_limits() -> None:
+    """At the needle's own kappa, v^3 kappa^2 <= J_n puts the hairpin at 4.4e-4 mm/s: a key
+    point at the densely sampled peak, planned no faster (the old plan had its key point at
+    u = 0.95 / 7, beside the needle, at 0.11 mm/s)."""
+    lim = load_machine("default").limits
+    u_peak, k_peak = hairpin_peak()
+    plan = plan_curve(HAIRPIN, lim)
+    k = int(np.argmin(np.abs(plan.key_u - u_peak)))
+    assert abs(plan.key_u[k] - u_peak) <= 1e-9, (plan.key_u[k], u_peak)
+    allowed = min((lim.normal_jerk_mm_s3 / k_peak**2) ** (1 / 3),
+                  (lim.normal_acc_mm_s2 / k_peak) ** 0.5)
+    assert plan.key_v_mm_s[k] <= allowed * (1 + 1e-6), (plan.key_v_mm_s[k], allowed)
+
+
+def test_the_hairpin_conversion_passes_check_and_its_jerk_vector_holds(tmp_path: Path) -> None:
+    """Judged by the positions: the jerk vector differenced from the full-precision trace stays
+    within the tangential and normal jerk limits together (the old plan reached 1.9 times it),
+    and `check` passes (it read tangential jerk 1.0033 times the limit)."""
+    source = DATA / "hairpin-needle.ngc"
+    out, trace = tmp_path / "out.nc", tmp_path / "trace.csv"
+    runner = CliRunner()
+    converted = runner.invoke(main, ["convert", str(source), "-o", str(out),
+                                     "--trace", str(trace)])
+    assert converted.exit_code == 0, converted.stderr
+    checked = runner.invoke(main, ["check", str(source), str(out)])
+    assert checked.exit_code == 0, checked.output
+    rows = np.genfromtxt(trace, delimiter=",", names=True)
+    lim = load_machine("default").limits
+    worst = 0.0
+    for c in np.unique(rows["curve"]):
+        mine = rows[rows["curve"] == c]
+        pos = np.column_stack([mine["x"], mine["y"], mine["z"]])
+        jerk = np.diff(pos, 3, axis=0) / lim.period_s**3
+        worst = max(worst, float(np.linalg.norm(jerk, axis=1).max()))
+    assert worst <= 1.02 * np.hypot(lim.jerk_mm_s3, lim.normal_jerk_mm_s3), worst

@@ -26,6 +26,9 @@ Building it, in order (`_grid_nodes`, one compiled call; then `simpson_lengths`)
         - they agree and kappa has finite one-sided limits: removable, the curve is smooth
           there; its kappa is the limit (the next finite value, `_fill_singular`).
       The ends of the curve are at rest anyway; a zero of C' there only blanks kappa.
+   c. near cusps, where |C'| refines to a minimum close to 0 but not 0 (the path turns back in
+      a hairpin far tighter than the samples): kappa peaks in a needle beside the minimum that
+      neither sample shows, so it is refined there and becomes a peak (`_near_cusp_peaks`).
 4. The maxima, corners and caller's parameters are merged in as nodes; then every interval
    across which kappa jumps is halved, a few times over.
 5. Arc length by adaptive Simpson between consecutive nodes (geometry.arclength).
@@ -82,6 +85,7 @@ ZERO_CANDIDATE_REL = 0.05  # a local minimum of |C'| on the samples below this o
 ZERO_ITERATIONS = 60  # Gauss-Newton steps towards a minimum of |C'|^2 (linear at a double zero)
 TANGENT_PROBE_REL = 1e-4  # of the span's width: where the chords beside a zero end ...
 TANGENT_CHORD_REL = 1e-9  # ... grown tenfold until they are this long (of the polygon's length)
+NEEDLE_WIDTHS = 8.0  # a near cusp's peak is sought within this many |C'|/|C''| of it
 KAPPA_BOUNDED_REL = 0.25  # kappa beside a zero changing by more than this over 16x: unbounded
 
 
@@ -523,13 +527,17 @@ def _stops(knots, coef, degree, breaks, u, speed, tangent, zero_speed, floor_mm,
     |C'| is at most zero_speed is a zero of C'; each is classified by `_zero_is_smooth`: a
     corner (the tangent jumps), a cusp or a reversal (it turns back), or a zero beside which
     kappa is unbounded is a stop (u, and the cosine of the turn); a removable zero is not (its
-    kappa is the one-sided limit, see `_fill_singular`). Returns (Q,) parameters and cosines.
+    kappa is the one-sided limit, see `_fill_singular`). Returns (Q,) parameters and cosines,
+    and the (R,) near cusps: candidates whose |C'| refines to a minimum above zero_speed, where
+    kappa may peak in a needle far narrower than the samples (`_near_cusp_peaks`).
     """
     n_ctrl = coef.shape[0]
     last = u.size - 1
     mean_speed = speed.mean()
     found = np.empty(2 * u.size + breaks.size)
     n = 0
+    near = np.empty(2 * u.size)
+    n_near = 0
     for q in range(1, last):
         if (speed[q] > speed[q - 1] or speed[q] > speed[q + 1]
                 or speed[q] > ZERO_CANDIDATE_REL * mean_speed):
@@ -550,6 +558,9 @@ def _stops(knots, coef, degree, breaks, u, speed, tangent, zero_speed, floor_mm,
         if best_speed <= zero_speed:
             found[n] = at
             n += 1
+        else:
+            near[n_near] = at
+            n_near += 1
     # a cusp or reversal between two samples need not show as a minimum of |C'| on them (|C'|
     # may fall on through it); the tangent turning back by more than 90 degrees does
     for q in range(last):
@@ -569,6 +580,9 @@ def _stops(knots, coef, degree, breaks, u, speed, tangent, zero_speed, floor_mm,
         if at_speed <= zero_speed:
             found[n] = at
             n += 1
+        else:
+            near[n_near] = at
+            n_near += 1
     span = degree
     for b in range(1, breaks.size - 1):
         knot = breaks[b]
@@ -599,7 +613,7 @@ def _stops(knots, coef, degree, breaks, u, speed, tangent, zero_speed, floor_mm,
             stop_u[m] = u0
             stop_cos[m] = cos
             m += 1
-    return stop_u[:m], stop_cos[:m]
+    return stop_u[:m], stop_cos[:m], near[:n_near]
 
 
 @jit
@@ -821,6 +835,41 @@ def _holds_any(sorted_u, low, high):
 
 
 @jit
+def _near_cusp_peaks(knots, coef, degree, u, kappa, near_u, kappa_floor):
+    """Step 2c: the curvature peaks of near cusps (R,) that the samples do not show.
+
+    Where |C'| dips close to 0 without reaching it (the path turns back in a hairpin of a
+    radius far below the sample spacing), kappa ~ 1/|C'|^2 peaks in a needle whose width in u
+    is ~|C'|/|C''| there: neither neighbouring sample holds it, and sampling their bracket
+    (`_refine_peak`) can step over it. Seen on a degree-4 curve: samples 3,777 and 6,087 1/mm
+    either side of a peak of 2.4e7, which the plan then passed at 0.11 mm/s, its velocity
+    reversing within one period. The peak lies beside the minimum of |C'|: each near cusp
+    whose kappa reaches kappa_floor and exceeds both samples around it is refined over a few
+    needle widths about it.
+    """
+    n_ctrl = coef.shape[0]
+    out = np.empty(near_u.size)
+    n = 0
+    for r in range(near_u.size):
+        u0 = near_u[r]
+        q = min(max(np.searchsorted(u, u0, side="right") - 1, 0), u.size - 2)
+        span = find_span(knots, degree, n_ctrl, u0, degree)
+        c = point_d2(knots, coef, degree, span, u0)
+        k0, speed0 = curvature(c[3], c[4], c[5], c[6], c[7], c[8])
+        if not k0 >= kappa_floor or not k0 > max(kappa[q], kappa[q + 1]):
+            continue
+        acc0 = math.sqrt(c[6] * c[6] + c[7] * c[7] + c[8] * c[8])
+        low, high = u[max(q - 1, 0)], u[min(q + 2, u.size - 1)]
+        if acc0 > 0.0:
+            width = NEEDLE_WIDTHS * speed0 / acc0
+            low, high = max(low, u0 - width), min(high, u0 + width)
+        peak, peak_k = _refine_peak(knots, coef, degree, low, high, kappa_floor)
+        out[n] = peak if peak_k > k0 else u0
+        n += 1
+    return out[:n]
+
+
+@jit
 def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, floor_mm):
     """Steps 1-4: nodes u, kappa, |C'| (M,), refined peak parameters (P,), stops (Q,) with
     the cosine of their turn (Q,), and the mean |C'| over the samples (the arc length
@@ -839,8 +888,8 @@ def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, f
                                                 u[idx[k] + 1], kappa_floor)
         peak_u[k] = refined_u if refined_kappa > kappa[idx[k]] else u[idx[k]]
     corner_u = _corners(knots, coef, degree, breaks, floor_mm)
-    zero_u, zero_cos = _stops(knots, coef, degree, breaks, u, speed, tan, zero_speed, floor_mm,
-                              kappa_floor)
+    zero_u, zero_cos, near_u = _stops(knots, coef, degree, breaks, u, speed, tan, zero_speed,
+                                      floor_mm, kappa_floor)
     stop_u = np.concatenate((corner_u, zero_u))
     stop_cos = np.concatenate((np.zeros(corner_u.size), zero_cos))
     order = np.argsort(stop_u)
@@ -852,6 +901,9 @@ def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, f
     for k in range(idx.size):
         keep[k] = not _holds_any(stop_u, u[idx[k] - 1], u[idx[k] + 1])
     peak_u = peak_u[keep]
+    needles = _near_cusp_peaks(knots, coef, degree, u, kappa, near_u, kappa_floor)
+    if needles.size:
+        peak_u = np.concatenate((peak_u, needles))
     peak_u = np.sort(peak_u)
     beside_u = _boundary_maxima(knots, coef, degree, breaks, u, peak_u, stop_u)
     if beside_u.size:
