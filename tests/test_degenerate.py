@@ -52,7 +52,9 @@ EXPECTED = {
     # a quadratic written P0 P0 P2 with weights 1, 0.544, 1 is a straight line; once written
     # as ONE G1 at F1.7e6 (|C'(0)| was 1.8e-15, not 0, and kappa 9.9e30 there)
     "repeated-start-weighted": ([], None),
-    "repeated-end-weighted": ([], None),
+    # ... and, at u = 0.33488, a hairpin of radius 4 um (|C'| 2 % of its mean, not 0), a turn
+    # back passed at rest (the minimum of |C'|, by dense sampling, is the stop)
+    "repeated-end-weighted": ([(0.3348761921, "cusp")], None),
     # a control point repeated `degree` times with simple knots: C' = 0 there, the path turns
     # by 90 degrees (G0 continuity written the usual NURBS way)
     "corner-tripled-point": ([(0.5, "corner")], 40.0),
@@ -77,11 +79,13 @@ EXPECTED = {
     "weight-1e3": ([], None),
     # a 2 um reversal at the start, then out along x and back 2 um aside: a turn of ~5 nm
     # radius (kappa 2e8; C' small but not 0), once held at 1e-5 mm/s for 2.6 s (1.38 s without
-    # shoulders today)
-    "near-cusp-beside-repeated-points": ([(0.1, "cusp")], None),
-    # a corner at a C0 knot beside a near cusp (|C'| 2 % of its mean, kappa 4e6) that the samples
-    # at 200 mm/s step over: once planned at 1,097 s (the whole law slowed 3,183-fold)
-    "spike-finer-than-the-samples": ([(0.05, "corner")], None),
+    # shoulders today); its far end at x = 26.44 is a turn back of |C'| 1e-4 of its mean (kappa
+    # 2e8), passed at rest at the minimum of |C'| (by dense sampling)
+    "near-cusp-beside-repeated-points": ([(0.1, "cusp"), (0.3307692308, "cusp")], None),
+    # a corner at a C0 knot beside a near cusp (|C'| 1 % of its mean, kappa 4e6) that the samples
+    # at 200 mm/s step over: once planned at 1,097 s (the whole law slowed 3,183-fold); the near
+    # cusp turns back, and rests at the minimum of |C'| (by dense sampling)
+    "spike-finer-than-the-samples": ([(0.0450000057, "cusp"), (0.05, "corner")], None),
 }
 # file -> the most its plan may take under the default profile at 100 mm/s (s)
 CYCLE_AT_MOST_S = {"weights-near-zero": 0.6, "weight-1e3": 0.7,
@@ -144,9 +148,9 @@ def test_plan_names_the_stops(name: str) -> None:
     assert "time-optimal bound" in result.output and "nan" not in result.output
 
 
-def test_a_spike_finer_than_the_samples_is_a_peak() -> None:
-    """At 200 mm/s the samples are 0.4 mm apart and step over the near cusp; the refined grid
-    finds it, and it becomes a peak of the plan instead of a uniform slowdown."""
+def test_a_spike_finer_than_the_samples_is_a_rest_not_a_slowdown() -> None:
+    """At 200 mm/s the samples are 0.4 mm apart and step over the near cusp; the grid finds it
+    (a turn back, so a rest), instead of a uniform slowdown of the whole law."""
     plan = plan_curve(load("spike-finer-than-the-samples"), DEFAULT)
     assert plan.cycle_time_s < 0.6
     assert plan.time_scale < 1.01

@@ -26,9 +26,12 @@ Building it, in order (`_grid_nodes`, one compiled call; then `simpson_lengths`)
         - they agree and kappa has finite one-sided limits: removable, the curve is smooth
           there; its kappa is the limit (the next finite value, `_fill_singular`).
       The ends of the curve are at rest anyway; a zero of C' there only blanks kappa.
-   c. near cusps, where |C'| refines to a minimum close to 0 but not 0 (the path turns back in
-      a hairpin far tighter than the samples): kappa peaks in a needle beside the minimum that
-      neither sample shows, so it is refined there and becomes a peak (`_near_cusp_peaks`).
+   c. near cusps, where |C'| refines to a minimum close to 0 but not 0: kappa peaks there in a
+      needle that neither neighbouring sample need show. One across which the path turns back
+      (`_near_cusp_turn`) is a hairpin, and a stop like a cusp: the stepping's arc position
+      runs a fraction of a micrometre off the law's between rests, enough to meet a tip of
+      nanometres before the law has slowed down for it. Any other is refined there and becomes
+      a peak (`_near_cusp_peaks`).
 4. The maxima, corners and caller's parameters are merged in as nodes; then every interval
    across which kappa jumps is halved, a few times over.
 5. Arc length by adaptive Simpson between consecutive nodes (geometry.arclength).
@@ -515,6 +518,43 @@ def _zero_is_smooth(knots, coef, degree, u0, width_before, width_after, floor_mm
 
 
 @jit
+def _near_cusp_turn(knots, coef, degree, u0):
+    """Step 3d: the cosine of the turn across a near cusp at u0 (a minimum of |C'| that is not
+    0): between the chords that arrive at C(u0) from NEEDLE_WIDTHS widths |C'|/|C''| before it
+    and leave it to as far after it (within the curve). Where C' ~ d + (u - u0) b, the tangent
+    turns by 2 atan(NEEDLE_WIDTHS) ~ 166 degrees over them: a turn back (cos < 0) is a hairpin
+    whose tip can be far tighter than any sample spacing, and the stepping's arc position, a
+    fraction of a micrometre off the law's between rests (rk2c runs ahead by the arc minus the
+    chord of every step), would meet the tip while the law is still slowing down: ahead of a
+    hairpin of radius 1e-12 mm planned at 2e-9 mm/s the velocity reversed at 0.06 mm/s. Passed
+    at rest, the stepping lands exactly on it."""
+    n_ctrl = coef.shape[0]
+    u_min = knots[degree]
+    u_max = knots[knots.size - degree - 1]
+    span = find_span(knots, degree, n_ctrl, u0, degree)
+    c = point_d2(knots, coef, degree, span, u0)
+    speed = math.sqrt(c[3] * c[3] + c[4] * c[4] + c[5] * c[5])
+    acc = math.sqrt(c[6] * c[6] + c[7] * c[7] + c[8] * c[8])
+    if acc == 0.0:
+        return 1.0
+    width = NEEDLE_WIDTHS * speed / acc
+    lo = max(u0 - width, u_min)
+    hi = min(u0 + width, u_max)
+    if lo >= u0 or hi <= u0:
+        return 1.0
+    ax, ay, az, _, _, _ = point_d1(knots, coef, degree, find_span(knots, degree, n_ctrl, lo,
+                                                                    span), lo)
+    bx, by, bz, _, _, _ = point_d1(knots, coef, degree, find_span(knots, degree, n_ctrl, hi,
+                                                                    span), hi)
+    ix, iy, iz = c[0] - ax, c[1] - ay, c[2] - az
+    ox, oy, oz = bx - c[0], by - c[1], bz - c[2]
+    norm = math.sqrt((ix * ix + iy * iy + iz * iz) * (ox * ox + oy * oy + oz * oz))
+    if norm == 0.0:
+        return 1.0
+    return (ix * ox + iy * oy + iz * oz) / norm
+
+
+@jit
 def _stops(knots, coef, degree, breaks, u, speed, tangent, zero_speed, floor_mm, kappa_floor):
     """Step 3: the interior points where C' vanishes and the motion must come to rest.
 
@@ -527,9 +567,11 @@ def _stops(knots, coef, degree, breaks, u, speed, tangent, zero_speed, floor_mm,
     |C'| is at most zero_speed is a zero of C'; each is classified by `_zero_is_smooth`: a
     corner (the tangent jumps), a cusp or a reversal (it turns back), or a zero beside which
     kappa is unbounded is a stop (u, and the cosine of the turn); a removable zero is not (its
-    kappa is the one-sided limit, see `_fill_singular`). Returns (Q,) parameters and cosines,
-    and the (R,) near cusps: candidates whose |C'| refines to a minimum above zero_speed, where
-    kappa may peak in a needle far narrower than the samples (`_near_cusp_peaks`).
+    kappa is the one-sided limit, see `_fill_singular`). A candidate whose |C'| refines to a
+    minimum above zero_speed is a near cusp: where the path turns back across it
+    (`_near_cusp_turn`) it is a stop too, a hairpin passed at rest; the others are returned as
+    (R,) parameters, where kappa may peak in a needle far narrower than the samples
+    (`_near_cusp_peaks`). Returns (Q,) parameters and cosines, and the (R,) near cusps.
     """
     n_ctrl = coef.shape[0]
     last = u.size - 1
@@ -593,10 +635,26 @@ def _stops(knots, coef, degree, breaks, u, speed, tangent, zero_speed, floor_mm,
             found[n] = knot
             n += 1
     zeros = np.sort(found[:n])
-    stop_u = np.empty(n)
-    stop_cos = np.empty(n)
-    m = 0
     resolution = EPS_U * 16.0 * (breaks[breaks.size - 1] - breaks[0])
+    near = np.sort(near[:n_near])
+    stop_u = np.empty(n + n_near)
+    stop_cos = np.empty(n + n_near)
+    m = 0
+    bends = np.empty(n_near)
+    n_bends = 0
+    for i in range(n_near):
+        u0 = near[i]
+        if (i > 0 and u0 - near[i - 1] <= resolution) or u0 <= breaks[0] or (
+                u0 >= breaks[breaks.size - 1]):
+            continue
+        cos = _near_cusp_turn(knots, coef, degree, u0)
+        if cos < 0.0:
+            stop_u[m] = u0
+            stop_cos[m] = cos
+            m += 1
+        else:
+            bends[n_bends] = u0
+            n_bends += 1
     for i in range(n):
         u0 = zeros[i]
         if (i > 0 and u0 - zeros[i - 1] <= resolution) or u0 <= breaks[0] or (
@@ -613,7 +671,8 @@ def _stops(knots, coef, degree, breaks, u, speed, tangent, zero_speed, floor_mm,
             stop_u[m] = u0
             stop_cos[m] = cos
             m += 1
-    return stop_u[:m], stop_cos[:m], near[:n_near]
+    order = np.argsort(stop_u[:m])
+    return stop_u[:m][order], stop_cos[:m][order], bends[:n_bends]
 
 
 @jit
