@@ -9,13 +9,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from nurbsfeed.analysis.check import check_files, render_check
 from nurbsfeed.analysis.common import curve_blocks
 from nurbsfeed.errors import ProfileError
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.geometry.nurbs import curvature_from_derivatives
 from nurbsfeed.interpolate import interpolate
 from nurbsfeed.machine import load_machine, machine_from_mapping
-from nurbsfeed.pipeline import plan_block
+from nurbsfeed.pipeline import convert_file, plan_block
 from nurbsfeed.planning.path_model import frames, jump_limits, motion_ratio
 from nurbsfeed.planning.planner import plan_curve
 from nurbsfeed.readers.json_curves import read_json_curves
@@ -181,3 +182,61 @@ def test_the_paper_model_is_still_the_papers() -> None:
     path = plan_curve(curve, machine_from_mapping(PAPER_LIMITS | {"jerk_model": "path"},
                                                   "test").limits)
     assert path.cycle_time_s > paper.cycle_time_s
+
+
+# ---- check under the path model --------------------------------------------------------------
+
+def _profile_file(tmp_path: Path, profile: dict) -> Path:
+    path = tmp_path / "profile.yaml"
+    path.write_text("".join(f"{key}: {value}\n" for key, value in profile.items()))
+    return path
+
+
+PATH_ROWS = ("tangential-jerk-xyz", "normal-jerk-xyz", "axis-vel-x", "axis-vel-y", "axis-acc-x",
+             "axis-acc-y", "axis-jerk-x", "axis-jerk-y")
+
+
+@pytest.mark.parametrize("name", ["butterfly.json", "fanuc-multi-curve.nc",
+                                  "linuxcnc-nurbs-yz.ngc"])
+def test_check_measures_the_path_quantities_and_passes_a_path_plan(tmp_path: Path,
+                                                                   name: str) -> None:
+    """Under `path`, check adds the jerk vector split on the path and each axis's velocity,
+    acceleration and jerk from the written points, and a path plan keeps every one of them
+    (and drops the proxy v^3 kappa^2, which the path model does not limit)."""
+    profile = _profile_file(tmp_path, PATH_PROFILE)
+    machine = load_machine(str(profile))
+    out = tmp_path / "out.nc"
+    convert_file(ROOT / "samples" / name, out, machine)
+    report = check_files(ROOT / "samples" / name, out, machine)
+    assert report.ok, "\n".join(map(str, report.violations))
+    measured = {m.name: m for m in report.measures}
+    moving = [row for row in PATH_ROWS if row[-1] in "xy" or name != "linuxcnc-nurbs-yz.ngc"]
+    for row in moving:
+        assert measured[row].n_checked > 0.99 * report.n_moves - 10, row
+    assert measured["normal-jerk"].n_checked == 0
+    table = render_check(report, "test")
+    assert "X jerk from positions" in table and "normal jerk v^3 kappa^2" not in table
+
+
+def test_check_fails_a_paper_plan_under_path_limits(tmp_path: Path) -> None:
+    """The butterfly planned under the paper model with the path profile's own limits breaks
+    the path model's (issue 15's table: the axis jerk 4x its limit): check, given the path
+    profile, finds the jerk across the path and the X and Y jerk over their limits."""
+    out = tmp_path / "out.nc"
+    source = ROOT / "samples" / "butterfly.json"
+    convert_file(source, out, load_machine(str(_profile_file(tmp_path, PAPER_LIMITS))))
+    path_machine = load_machine(str(_profile_file(tmp_path, PATH_PROFILE)))
+    report = check_files(source, out, path_machine)
+    measured = {m.name: m for m in report.measures}
+    for row in ("normal-jerk-xyz", "axis-jerk-x", "axis-jerk-y"):
+        assert measured[row].n_violations > 0 and measured[row].ratio > 1.5, measured[row]
+
+
+def test_check_under_the_paper_model_shows_no_path_rows(tmp_path: Path) -> None:
+    out = tmp_path / "out.nc"
+    source = ROOT / "samples" / "butterfly.json"
+    machine = load_machine("default")
+    convert_file(source, out, machine)
+    table = render_check(check_files(source, out, machine), "default")
+    assert "normal jerk v^3 kappa^2" in table
+    assert "jerk from positions" not in table and "X velocity" not in table

@@ -11,6 +11,7 @@ from nurbsfeed.analysis.check.estimates import (
     acceleration_xyz,
     baseline_s,
     derivative_estimate,
+    divided_difference_weights,
     stencils,
     turning_rad,
 )
@@ -104,6 +105,16 @@ from nurbsfeed.program import MM_PER_UNIT, CurveBlock
 #                    (v1.v2 < 0), |v2 - v1| >= max(|v1|, |v2|), and v2 - v1 = a^ (t2 - t0) / 2:
 #                    so max(|v1|, |v2|) <= sqrt(A_t^2 + A_n^2) (t2 - t0) / 2 + 2 r / (t1 - t0)
 #                    + 2 r / (t2 - t1).
+#   path model       under `jerk_model: path` (design §2b) the proxy v^3 kappa^2 is not checked;
+#                    instead j^ = 6 P^[t0..t3], the third divided difference of the written
+#                    points on nodes about h apart (h: as for the tangential jerk, with
+#                    min(J_t, J_n)), split on the unit tangent at the stencil's middle like a^:
+#                    |j^.T1| <= J_t + J_n sin(theta) + noise, across it <= J_n + J_t sin(theta) +
+#                    noise; and per axis with a limit of its own, the chord's mean velocity, a^
+#                    and j^ (h from that axis kind's lowest limit, noise from the coordinate's
+#                    own rounding r / sqrt 3) within the axis limit + noise. A divided difference
+#                    is a weighted mean of the true derivative, never above its peak: these rows
+#                    can read a short peak low, never a correct motion high.
 #   structure        every non-NURBS source line present, byte-identical and in order; every curve
 #                    once; every X/Y/Z/F value with a decimal point, no negative zero, no F0, no
 #                    zero-length move, F on the first move; G90 ... G91 around the moves of a G91
@@ -161,7 +172,9 @@ def check_section(section: Section, block: CurveBlock, machine: Machine,
     h_a = baseline_s(period, 2, r, lim.acc_mm_s2)
     h_j = baseline_s(period, 3, r, lim.jerk_mm_s3)
     h_x = baseline_s(period, 2, r, min(lim.acc_mm_s2, lim.normal_acc_mm_s2))
-    findings.estimation.append(Estimation(section.index, r, h_a, h_j, h_x))
+    path = lim.jerk_model == "path"
+    h_p = baseline_s(period, 3, r, min(lim.jerk_mm_s3, lim.normal_jerk_mm_s3)) if path else 0.0
+    findings.estimation.append(Estimation(section.index, r, h_a, h_j, h_x, h_p))
     if abs(section.period_ms * 1e-3 - period) > 1e-9 * period:
         findings.add("comment", section.comment_line,
                      f"the comment announces a {section.period_ms:g} ms period, the machine "
@@ -231,6 +244,8 @@ def check_section(section: Section, block: CurveBlock, machine: Machine,
         findings.measure("coverage", np.diff(s), cap_g * np.diff(tg), e[:-1] + e[1:], pl[1:])
         _check_arc_kinematics(curve, lim, ug, tg, pl, s, e, kappa, h_a, h_j, findings)
     _check_xyz_kinematics(curve, lim, pos, t_s, u, point_lines, r, acc_total, h_x, findings)
+    if path:
+        _check_path_kinematics(curve, lim, pos, t_s, u, point_lines, r, h_p, findings)
 
 
 def _check_timing(section: Section, block: CurveBlock, lim: Limits, r: float,
@@ -298,8 +313,10 @@ def _check_arc_kinematics(curve: NurbsCurve, lim: Limits, ug: np.ndarray, tg: np
     du = e / np.maximum(curve.speed(ug), 1e-300)
     k_low = np.minimum(kappa, np.minimum(curvature_1_mm(curve, np.maximum(ug - du, curve.u_min)),
                                          curvature_1_mm(curve, np.minimum(ug + du, curve.u_max))))
-    for name, power, limit in (("normal-acc", 2, lim.normal_acc_mm_s2),
-                               ("normal-jerk", 3, lim.normal_jerk_mm_s3)):
+    proxies = [("normal-acc", 2, lim.normal_acc_mm_s2)]
+    if lim.jerk_model == "paper":  # under `path` the jerk vector from positions stands instead
+        proxies.append(("normal-jerk", 3, lim.normal_jerk_mm_s3))
+    for name, power, limit in proxies:
         kk = k_low ** (power - 1)
         value = v**power * kk
         allowance = ((v + e_v) ** power - v**power) * kk * (1.0 + NUMERIC_REL_TOL)
@@ -343,6 +360,50 @@ def _check_xyz_kinematics(curve: NurbsCurve, lim: Limits, pos: np.ndarray, t_s: 
     findings.measure("reversal", speed[flip], acc_total * (t[flip, 2] - t[flip, 0]) / 2.0,
                      (2.0 * r / d1[flip] + 2.0 * r / d2[flip]) * (1.0 + NUMERIC_REL_TOL),
                      line[flip])
+
+
+def _check_path_kinematics(curve: NurbsCurve, lim: Limits, pos: np.ndarray, t_s: np.ndarray,
+                           u: np.ndarray, point_lines: np.ndarray, r: float, h_p: float,
+                           findings: Findings) -> None:
+    """Under the jerk model `path`: the jerk vector from the written points split on the path,
+    and every axis with a limit of its own (velocity, acceleration, jerk)."""
+    idx = stencils(t_s, 3, h_p)
+    if idx.size:
+        w = divided_difference_weights(t_s, idx)
+        jerk = np.einsum("sq,sqc->sc", w, pos[idx])
+        noise = r * np.sum(np.abs(w), axis=1) * (1.0 + NUMERIC_REL_TOL)
+        tangent, theta = turning_rad(curve, u[idx[:, 0]], 0.5 * (u[idx[:, 1]] + u[idx[:, 2]]),
+                                     u[idx[:, 3]])
+        split = ~np.isnan(tangent[:, 0])
+        along = np.sum(jerk[split] * tangent[split], axis=1)
+        across = np.linalg.norm(jerk[split] - along[:, None] * tangent[split], axis=1)
+        sin_turn = np.sin(np.minimum(theta[split], 0.5 * np.pi))
+        line = point_lines[idx[split, 1]]
+        findings.measure("tangential-jerk-xyz", np.abs(along), lim.jerk_mm_s3,
+                         lim.normal_jerk_mm_s3 * sin_turn + noise[split], line)
+        findings.measure("normal-jerk-xyz", across, lim.normal_jerk_mm_s3,
+                         lim.jerk_mm_s3 * sin_turn + noise[split], line)
+    r_axis = r / math.sqrt(3.0)  # each coordinate is rounded on its own
+    for kind, order, limits in (("axis-vel", 1, lim.axis_vel_mm_s),
+                                ("axis-acc", 2, lim.axis_acc_mm_s2),
+                                ("axis-jerk", 3, lim.axis_jerk_mm_s3)):
+        bound = np.asarray(limits, dtype=float)
+        if not np.isfinite(bound).any():
+            continue
+        if order == 1:  # a chord's mean velocity, between consecutive points
+            idx = np.column_stack([np.arange(t_s.size - 1), np.arange(1, t_s.size)])
+        else:
+            idx = stencils(t_s, order, baseline_s(lim.period_s, order, r_axis,
+                                                  float(bound[np.isfinite(bound)].min())))
+        if idx.size == 0:
+            continue
+        w = divided_difference_weights(t_s, idx)
+        value = np.abs(np.einsum("sq,sqc->sc", w, pos[idx]))
+        noise = r_axis * np.sum(np.abs(w), axis=1) * (1.0 + NUMERIC_REL_TOL)
+        line = point_lines[idx[:, order // 2]]
+        for a, axis in enumerate("xyz"):
+            if math.isfinite(bound[a]):
+                findings.measure(f"{kind}-{axis}", value[:, a], bound[a], noise, line)
 
 
 def _xyz(p: np.ndarray) -> str:

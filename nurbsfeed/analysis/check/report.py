@@ -60,11 +60,29 @@ CHECKS: dict[str, tuple[str, str, str]] = {
                "corner taken at speed: the path turns sharply here and the acceleration from the "
                "positions is {value:.6g} mm/s^2 > {limit:.6g} + {allowance:.3g} mm/s^2 rounding "
                "noise (the feed must come down to rest at a corner)"),
+    "tangential-jerk-xyz": ("tangential jerk from positions", "mm/s^3",
+                            "jerk along the path from the positions {value:.6g} mm/s^3 > "
+                            "{limit:.6g} + {allowance:.3g} mm/s^3 (rounding noise and turning)"),
+    "normal-jerk-xyz": ("normal jerk from positions", "mm/s^3",
+                        "jerk across the path from the positions {value:.6g} mm/s^3 > "
+                        "{limit:.6g} + {allowance:.3g} mm/s^3 (rounding noise and turning)"),
+    **{f"{kind}-{axis}": (f"{axis.upper()} {title} from positions", unit,
+                          f"{axis.upper()} {title} from the positions {{value:.6g}} {unit} > "
+                          f"{{limit:.6g}} + {{allowance:.3g}} {unit} rounding noise")
+       for kind, title, unit in (("axis-vel", "velocity", "mm/s"),
+                                 ("axis-acc", "acceleration", "mm/s^2"),
+                                 ("axis-jerk", "jerk", "mm/s^3"))
+       for axis in "xyz"},
     "reversal": ("speed where velocity flips", "mm/s",
                  "reversal taken at speed: the velocity turns back at {value:.6g} mm/s, while "
                  "the acceleration limits allow a turn-back over this baseline only below "
                  "{limit:.6g} mm/s + {allowance:.3g} mm/s rounding noise"),
 }
+# rows of one jerk model only (design §2b): the proxy v^3 kappa^2 under `paper`; the jerk vector
+# split on the path, and each axis with a limit of its own, under `path`. A row measured nowhere
+# is left out of the table.
+MODEL_CHECKS = frozenset({"normal-jerk", "tangential-jerk-xyz", "normal-jerk-xyz"} | {
+    f"{kind}-{axis}" for kind in ("axis-vel", "axis-acc", "axis-jerk") for axis in "xyz"})
 STRUCTURE_CHECKS = ("pass-through", "curve-missing", "curve-extra", "comment", "no-moves",
                     "end-point", "period-total", "decimal-point", "number", "negative-zero",
                     "zero-feed", "zero-length", "feed-word", "g90-g91", "feed-restore")
@@ -109,6 +127,7 @@ class Estimation:
     acc_baseline_s: float  # h for the tangential acceleration
     jerk_baseline_s: float  # h for the tangential jerk
     xyz_baseline_s: float  # h for the acceleration vector from positions
+    path_baseline_s: float = 0.0  # h for the jerk vector (jerk model `path`; 0: not measured)
 
 
 @dataclass(frozen=True)
@@ -202,6 +221,8 @@ def render_check(report: CheckReport, machine_name: str) -> str:
              f"{'check':<31} {'unit':<7} {'worst':>11} {'limit':>11} {'allowance':>10} "
              f"{'ratio':>7} {'points':>8} {'broken':>6}  worst at"]
     for m in report.measures:
+        if m.n_checked == 0 and m.name in MODEL_CHECKS:
+            continue
         if m.n_checked == 0:
             lines.append(f"{m.title:<31} {m.unit:<7} {'-':>11} {'-':>11} {'-':>10} {'-':>7} "
                          f"{0:>8} {0:>6}")
@@ -212,12 +233,15 @@ def render_check(report: CheckReport, machine_name: str) -> str:
     broken = [f"{name} ({count})" for name, count in report.structure.items() if count]
     lines.append("source lines, curves, number format, curve ends, G90/G91 and F restore: "
                  + ("ok" if not broken else "BROKEN: " + ", ".join(broken)))
-    for r_mm, h_a, h_j, h_x in sorted({(e.rounding_mm, e.acc_baseline_s, e.jerk_baseline_s,
-                                        e.xyz_baseline_s) for e in report.estimation}):
+    for r_mm, h_a, h_j, h_x, h_p in sorted({(e.rounding_mm, e.acc_baseline_s,
+                                             e.jerk_baseline_s, e.xyz_baseline_s,
+                                             e.path_baseline_s) for e in report.estimation}):
+        path = (f"; jerk from positions: third divided differences over {h_p * 1e3:g} ms"
+                if h_p else "")
         lines.append(f"ratio = worst / (limit + allowance); output rounding r = {r_mm:.3g} mm; "
                      f"tangential a, j: divided differences of the projected arc length over "
                      f"{h_a * 1e3:g} ms, {h_j * 1e3:g} ms; acceleration from positions: second "
-                     f"divided differences of the written points over {h_x * 1e3:g} ms; "
+                     f"divided differences of the written points over {h_x * 1e3:g} ms{path}; "
                      f"allowance: their rounding-noise bound")
     lines += [f"note: {note}" for note in report.notes]
     lines += [str(v) for v in report.violations]
