@@ -11,8 +11,15 @@ Bounds, with room for the finite differences of one period (a second difference 
 acceleration to O(T^2 j'), its chordal normal part v^2 kappa to O((kappa v T)^2)):
     |P_k+1 - P_k|                 <= v_m T (1 + GUARD_FEED_REL)
     |P_k+1 - 2 P_k + P_k-1| / T^2 <= sqrt(A_t^2 + A_n^2) (1 + GUARD_ACC_REL)
-plus GUARD_ABS_MM of rounding on every difference. The bounds are necessary, not sufficient:
-`nurbsfeed check` and the tests measure each limit on its own.
+plus GUARD_ABS_MM of rounding on every difference. Under the jerk model `path` (design §2b),
+whose limits are those of the motion itself, also the jerk and every axis with limits of its own:
+    |P_k+2 - 3 P_k+1 + 3 P_k - P_k-1| / T^3 <= sqrt(J_t^2 + J_n^2) (1 + GUARD_JERK_REL)
+    per axis x: the step <= V_x T (1 + GUARD_FEED_REL), the second difference <= A_x T^2
+    (1 + GUARD_ACC_REL), the third <= J_x T^3 (1 + GUARD_JERK_REL)
+(a k-th difference is a weighted mean of the k-th derivative over k periods: it never exceeds
+the motion's own peak; the paper model's jerk limits are the law's and a proxy, not the motion's,
+so its jerk is not guarded). The bounds are necessary, not sufficient: `nurbsfeed check` and the
+tests measure each limit on its own.
 """
 
 from __future__ import annotations
@@ -28,6 +35,7 @@ from nurbsfeed.program import CurveBlock
 
 GUARD_FEED_REL = 1e-3  # a wild move is far above; a stepping error of 1e-4 is not one
 GUARD_ACC_REL = 0.05
+GUARD_JERK_REL = 0.05
 GUARD_ABS_MM = 1e-9
 
 
@@ -78,6 +86,18 @@ class MotionGuard:
         self.label = curve_label
         self.before = np.full((2, 3), np.nan)
         self.seen = 0
+        # jerk model `path`: bounds on the k-th differences (k = 1, 2, 3), per axis and (k = 3)
+        # on the vector; the last three points seen
+        self.path = lim.jerk_model == "path"
+        if self.path:
+            margin = (1.0 + GUARD_FEED_REL, 1.0 + GUARD_ACC_REL, 1.0 + GUARD_JERK_REL)
+            per_axis = (lim.axis_vel_mm_s, lim.axis_acc_mm_s2, lim.axis_jerk_mm_s3)
+            self.axis_limits = [np.asarray(limits, dtype=float) for limits in per_axis]
+            self.axis_bounds = [limits * period**k * margin[k - 1] + 2 ** (k - 1) * GUARD_ABS_MM
+                                for k, limits in enumerate(self.axis_limits, start=1)]
+            self.jerk_mm_s3 = math.hypot(lim.jerk_mm_s3, lim.normal_jerk_mm_s3)
+            self.max_jerk_mm = self.jerk_mm_s3 * period**3 * margin[2] + 8.0 * GUARD_ABS_MM
+            self.tail = np.empty((0, 3))
 
     def check(self, points: np.ndarray) -> None:
         """points (N, 3): the next points of the curve, one period apart."""
@@ -95,9 +115,44 @@ class MotionGuard:
                            f"the profile's {self.acc_mm_s2:.6g} mm/s^2 (tangential and normal)")
             raise CurveError(f"{self.label}: refused, point {at} {problem}; nothing was "
                              f"written (a safety check: please report this curve)")
+        if self.path:
+            self._check_path(points)
         n = points.shape[0]
         if n >= 2:
             self.before = points[-2:].copy()
         elif n == 1:
             self.before = np.stack([self.before[1], points[0]])
         self.seen += n
+
+    def _check_path(self, points: np.ndarray) -> None:
+        """The jerk model's own bounds on points (N, 3), after the last three points seen."""
+        held = self.tail.shape[0]
+        joined = np.concatenate([self.tail, points])
+        self.tail = joined[-3:].copy()
+        period = self.period_s
+        worst: tuple[int, str] | None = None
+        diff = joined
+        for k, bound in enumerate(self.axis_bounds, start=1):
+            diff = np.diff(diff, axis=0)  # diff[i] ends at joined[i + k]
+            names = ("move", "accelerate", "jerk")
+            over = np.flatnonzero(np.any(np.abs(diff) > bound, axis=1))
+            if k == 3:
+                size = np.linalg.norm(diff, axis=1)
+                over = np.union1d(over, np.flatnonzero(size > self.max_jerk_mm))
+            over = over[over + k >= held]  # ending on a new point
+            if over.size and (worst is None or over[0] + k - held < worst[0]):
+                i = int(over[0])
+                axis = int(np.argmax(np.abs(diff[i]) / np.maximum(bound, 1e-300)))
+                value = abs(diff[i, axis]) / period**k
+                unit = ("mm/s", "mm/s^2", "mm/s^3")[k - 1]
+                limit = self.axis_limits[k - 1][axis]
+                problem = (f"would {names[k - 1]} at {value:.6g} {unit} along {'XYZ'[axis]}, "
+                           f"above the axis's {limit:.6g} {unit}")
+                if k == 3 and np.linalg.norm(diff[i]) > self.max_jerk_mm:
+                    problem = (f"would jerk at {np.linalg.norm(diff[i]) / period**3:.6g} "
+                               f"mm/s^3, above the profile's {self.jerk_mm_s3:.6g} mm/s^3 "
+                               f"(tangential and normal)")
+                worst = (i + k - held, problem)
+        if worst is not None:
+            raise CurveError(f"{self.label}: refused, point {self.seen + worst[0]} {worst[1]}; "
+                             f"nothing was written (a safety check: please report this curve)")

@@ -20,6 +20,7 @@ from nurbsfeed.pipeline import convert_file, plan_block
 from nurbsfeed.planning.path_model import frames, jump_limits, motion_ratio
 from nurbsfeed.planning.planner import plan_curve
 from nurbsfeed.readers.json_curves import read_json_curves
+from nurbsfeed.safety import MotionGuard
 from tests.bench.dense_curves import dense_curves
 from tests.motion_from_positions import path_motion
 
@@ -171,6 +172,7 @@ def test_dense_curves_keep_every_path_limit_measured_from_their_points(curve: Nu
     result = interpolate(plan_curve(curve, lim), "rk2c")
     worst = _worst_over_limits(result.points, result.period_s, lim)
     assert max(worst.values()) <= FROM_POSITIONS, worst
+    MotionGuard(lim, curve.name).check(result.points)  # and the path model's guard lets it pass
 
 
 def test_the_paper_model_is_still_the_papers() -> None:
