@@ -252,3 +252,25 @@ def test_a_reversal_beside_a_double_knot_is_a_stop(tmp_path: Path) -> None:
     convert_file(source, target, machine)
     report = check_files(source, target, machine)
     assert report.ok, "\n".join(map(str, report.violations))
+
+
+def test_a_corner_across_a_zero_length_span_of_a_closed_curve_is_a_stop(tmp_path: Path) -> None:
+    """Fuzzer find (seed 32): a rational polyline (degree 1) out along X and back to the origin,
+    a span of no length there (two equal control points), up along Y and back to the origin,
+    where it ends. At the origin the path turns by 90 degrees across the empty span, but the
+    probe for the tangent after it grew tenfold from the span's width straight to the curve's
+    end, also the origin, found no length and called the corner an end of the curve: taken at
+    speed, 5,493 mm/s^2 from positions, and the motion guard refused the curve. The polygon
+    says where the motion must rest: at the turns back (knots 3 and 13 of 14) and at the corner
+    (knot 5, where the empty span starts), and nowhere else (a corner's flip of the tangent
+    between samples is no near cusp)."""
+    source = CASES / "closed-zero-length-span-corner.nc"
+    curve = next(item.curve for item in read_program(source) if hasattr(item, "curve"))
+    machine = load_machine("default")
+    plan = plan_curve(curve, machine.limits)
+    stops = plan.grid.u[plan.grid.stop_index]
+    np.testing.assert_allclose(stops, np.array([3, 5, 13]) / 14, atol=1e-12)
+    target = tmp_path / "out.nc"
+    convert_file(source, target, machine)
+    report = check_files(source, target, machine)
+    assert report.ok, "\n".join(map(str, report.violations))

@@ -458,16 +458,28 @@ def _refine_zero(knots, coef, degree, u, low, high):
 def _chord_from(knots, coef, degree, u0, side, width, u_limit, floor_mm):
     """Step 3b: the unit chord between C(u0) and C(u0 + side h), in the direction of travel,
     with h = TANGENT_PROBE_REL * width grown tenfold until the chord is at least floor_mm long
-    (never past u_limit). At a zero of C' this is the one-sided tangent: the curve leaves the
-    point along it. Returns the unit vector and h; h = 0 if no chord is long enough."""
+    (never past u_limit, and never past a knot without a chord to it: past a span of no length,
+    a tenfold step could leap to a point the curve comes back to, such as the start of a
+    closed curve, and call the curve an end there). At a zero of C' this is the one-sided
+    tangent: the curve leaves the point along it. Returns the unit vector and h; h = 0 if no
+    chord is long enough."""
     n_ctrl = coef.shape[0]
     span = find_span(knots, degree, n_ctrl, u0, degree)
     px, py, pz, _, _, _ = point_d1(knots, coef, degree, span, u0)
     h = TANGENT_PROBE_REL * width
+    reached = u0
     while True:
         u = u0 + side * h
         if side * (u - u_limit) > 0.0:
             u = u_limit
+        nearest = u  # the first knot past the last probe, if this step would leap it
+        for k in knots:
+            if side * (k - reached) > 0.0 and side * (nearest - k) > 0.0:
+                nearest = k
+        if nearest != u:
+            u = nearest
+            h = abs(u - u0)
+        reached = u
         span = find_span(knots, degree, n_ctrl, u, span)
         qx, qy, qz, _, _, _ = point_d1(knots, coef, degree, span, u)
         dx = side * (qx - px)
@@ -600,7 +612,7 @@ def _stops(knots, coef, degree, breaks, u, speed, tangent, zero_speed, floor_mm,
         if best_speed <= zero_speed:
             found[n] = at
             n += 1
-        else:
+        elif best_speed <= ZERO_CANDIDATE_REL * mean_speed:
             near[n_near] = at
             n_near += 1
     # a cusp or reversal between two samples need not show as a minimum of |C'| on them (|C'|
@@ -622,7 +634,7 @@ def _stops(knots, coef, degree, breaks, u, speed, tangent, zero_speed, floor_mm,
         if at_speed <= zero_speed:
             found[n] = at
             n += 1
-        else:
+        elif at_speed <= ZERO_CANDIDATE_REL * mean_speed:  # not a corner's flip of the tangent
             near[n_near] = at
             n_near += 1
     span = degree
