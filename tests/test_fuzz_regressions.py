@@ -9,6 +9,9 @@ import pytest
 from click.testing import CliRunner
 
 from nurbsfeed.cli import main
+from tests.fuzz.oracle import check_case
+
+ROOT = Path(__file__).resolve().parents[1]
 
 HEAD = "G21 G90 G0 X0 Y0\nF100\n"
 
@@ -118,3 +121,17 @@ def test_k_words_where_they_mean_something_pass_through(tmp_path: Path, program:
     result = CliRunner().invoke(main, ["convert", str(source), "-o", str(tmp_path / "o.nc")])
     assert result.exit_code == 0, result.stderr
     assert (tmp_path / "o.nc").read_text() == program
+
+
+@pytest.mark.parametrize("name", ["in.ngc", "in.nc", "in.json"])
+def test_json_under_any_name_is_read_as_json_by_the_tool_and_the_oracle(tmp_path: Path,
+                                                                         name: str) -> None:
+    """Fuzz seed 32 (samples family): a JSON sample spliced whole into an .ngc or .nc file is
+    converted as JSON (its first character is "{"), and the oracle judged its output as a
+    G-code program's ('output line not in the input'). Both now follow the README's rule; a
+    G-code program is still judged by its pass-through lines."""
+    data = (ROOT / "samples" / "quarter-circle.json").read_bytes()
+    outcome = check_case(tmp_path, name, b"\n " + data)
+    assert outcome.exit_code == 0 and outcome.problem is None, outcome
+    gcode = (ROOT / "samples" / "linuxcnc-nurbs-xy.ngc").read_bytes()
+    assert check_case(tmp_path, "in.ngc", gcode).problem is None

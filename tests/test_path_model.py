@@ -3,6 +3,7 @@ and the limits the machine feels, measured from the interpolation points themsel
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -242,3 +243,28 @@ def test_check_under_the_paper_model_shows_no_path_rows(tmp_path: Path) -> None:
     table = render_check(check_files(source, out, machine), "default")
     assert "normal jerk v^3 kappa^2" in table
     assert "jerk from positions" not in table and "X velocity" not in table
+
+
+# Random curves (tests/test_degenerate's strategy) the path model once planned absurdly, each
+# at under 5 s under paper-model limits: 7.6e8 s (u from s by a linear guess beside a triple
+# control point, where s grows as (u - u0)^3, put law samples 1e-9 of u from the stop, where
+# kappa is rounding noise: kappa 5e20), 1.7e9 s and 3e20 s (a node where C' = 0 that the grid
+# passes at speed, a zero-length span's end or a removable zero at a knot: its frame is noise,
+# kappa 2e30, and its static limit 1e-19 mm/s). Refused as too long, or planning for minutes.
+# Now within 3x the paper model's cycle under the same limits (the path model's own cost: the
+# butterfly takes 1.38x, cam-63 2.6x; see docs/benchmarks.md).
+DEGENERATE = sorted((Path(__file__).parent / "data" / "path").glob("*.json"))
+
+
+@pytest.mark.parametrize("source", DEGENERATE, ids=lambda p: p.stem)
+def test_degenerate_curves_are_planned_sanely_and_keep_the_path_limits(source: Path) -> None:
+    _, [(curve, feed)] = read_json_curves(source)
+    path = machine_from_mapping(PATH_PROFILE, "test").limits
+    lim = dataclasses.replace(path, feed_mm_s=min(path.feed_mm_s, feed))
+    paper = plan_curve(curve, dataclasses.replace(lim, jerk_model="paper"))
+    plan = plan_curve(curve, lim, max_curve_time_s=60.0)
+    assert plan.cycle_time_s <= 3.0 * paper.cycle_time_s, (plan.cycle_time_s, paper.cycle_time_s)
+    result = interpolate(plan, "rk2c")
+    worst = _worst_over_limits(result.points, result.period_s, lim)
+    assert max(worst.values()) <= FROM_POSITIONS, worst
+    MotionGuard(lim, source.stem).check(result.points)

@@ -40,7 +40,7 @@ import numpy as np
 from nurbsfeed.errors import CurveError
 from nurbsfeed.geometry.nurbs import NurbsCurve, curvature_from_derivatives
 from nurbsfeed.jit import jit
-from nurbsfeed.planning.grid import Grid, build_grid, polygon_length
+from nurbsfeed.planning.grid import ZERO_SPEED_REL, Grid, build_grid, polygon_length
 from nurbsfeed.planning.limits import Limits, curvature_threshold, speed_limit
 from nurbsfeed.planning.path_model import (
     frames,
@@ -444,7 +444,19 @@ def _path_limit(curve: NurbsCurve, grid: Grid, lim: Limits, raw_limit: np.ndarra
     static_limit`, and the speed at knots where kappa N jumps) and the knots where that jump
     sets the limit, which become key points: the law passes them at zero acceleration, at a
     speed no higher than their limit."""
-    limit = np.minimum(raw_limit, static_limit(frames(curve, grid.u), lim))
+    static = static_limit(frames(curve, grid.u), lim)
+    # where C' = 0 (a removable zero the grid passes at speed) the frame is rounding noise
+    # (kappa 2e30 at a knot of |C'| 5e-14 once planned a curve at 3e20 s): the lower of the
+    # neighbours' limits, as the grid takes kappa there from inside
+    speed = curve.speed(grid.u)
+    zero = speed <= ZERO_SPEED_REL * speed.mean()
+    if zero.any() and not zero.all():
+        index = np.arange(static.size)
+        before = np.maximum.accumulate(np.where(zero, -1, index))  # last node with a frame
+        after = np.minimum.accumulate(np.where(zero, static.size, index)[::-1])[::-1]
+        padded = np.concatenate([static, [np.inf, np.inf]])  # indices -1 and M read inf
+        static = np.where(zero, np.minimum(padded[before], padded[after]), static)
+    limit = np.minimum(raw_limit, static)
     breaks = curve.span_breaks[1:-1]
     nodes = np.searchsorted(grid.u, breaks)
     inside = nodes < grid.u.size
@@ -461,21 +473,62 @@ PATH_SAMPLES_PER_PERIOD = 2  # the path model's final check samples the law this
 PATH_CHUNK = 1 << 16  # samples per chunk of that check: memory stays bounded on long curves
 
 
+# 8-point Gauss-Legendre nodes and weights on [-1, 1], for the arc length inside one grid interval
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
+UNEVEN_SPEED = 1.5  # |C'| changing by more than this across a grid interval: u(s) is not linear
+ARC_BISECTIONS = 60
+
+
+def arc_parameters(curve: NurbsCurve, grid: Grid, s_mm: np.ndarray) -> np.ndarray:
+    """u at arc lengths s_mm (N,) on the grid: linear between nodes where |C'| is even across
+    the interval; elsewhere (beside a zero of C', a stop or an end, where s grows like a power of
+    u - u0 and a linear guess lands orders of magnitude closer to the zero, where kappa is
+    rounding noise) by bisection on the arc length, integrated from the interval's first node."""
+    u = np.interp(s_mm, grid.s_mm, grid.u)
+    speed = curve.speed(grid.u)
+    interval = np.clip(np.searchsorted(grid.s_mm, s_mm, side="right") - 1, 0, grid.u.size - 2)
+    low_speed = np.minimum(speed[interval], speed[interval + 1])
+    high_speed = np.maximum(speed[interval], speed[interval + 1])
+    uneven = np.flatnonzero(high_speed > UNEVEN_SPEED * low_speed)
+    if uneven.size == 0:
+        return u
+    first = interval[uneven]
+    lo, hi = grid.u[first].copy(), grid.u[first + 1].copy()
+    target = s_mm[uneven] - grid.s_mm[first]
+    start = grid.u[first]
+    for _ in range(ARC_BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        half = 0.5 * (mid - start)
+        centre = 0.5 * (mid + start)
+        points = (centre[:, None] + half[:, None] * _GL_X[None, :]).ravel()
+        arc = half * (curve.speed(points).reshape(mid.size, _GL_X.size) @ _GL_W)
+        below = arc < target
+        lo = np.where(below, mid, lo)
+        hi = np.where(below, hi, mid)
+    u[uneven] = 0.5 * (lo + hi)
+    return u
+
+
 def path_slowdown(curve: NurbsCurve, grid: Grid, law: TimeLaw, lim: Limits) -> float:
     """The uniform slowdown (>= 1) that keeps every path-model limit where the law goes: the
     law sampled PATH_SAMPLES_PER_PERIOD times a period, each sample's parameter found from its
-    arc length on the grid, and `path_model.motion_ratio` there. The key points and the fix
-    rounds keep the static terms; this covers what the S-curve's own acceleration and jerk add
-    (3 kappa v a across the path, -kappa^2 v^3 + j along it, a T_x per axis)."""
+    arc length on the grid (`arc_parameters`), and `path_model.motion_ratio` there, except at
+    zeros of C' (rests and removable zeros, where the frame is rounding noise). The key points
+    and the fix rounds keep the static terms; this covers what the S-curve's own acceleration
+    and jerk add (3 kappa v a across the path, -kappa^2 v^3 + j along it, a T_x per axis)."""
     worst = 1.0
     if law.duration_s <= 0.0:
         return worst
     n = max(2, int(math.ceil(law.duration_s / lim.period_s * PATH_SAMPLES_PER_PERIOD)) + 1)
+    zero_speed = ZERO_SPEED_REL * float(curve.speed(grid.u).mean())
     for start in range(0, n, PATH_CHUNK):
         t = np.arange(start, min(n, start + PATH_CHUNK)) * (law.duration_s / (n - 1))
         piece, local, v, a, j = law.sample(t)
-        u = np.interp(law.s0_mm[piece] + local, grid.s_mm, grid.u)
-        worst = max(worst, float(np.max(motion_ratio(frames(curve, u), v, a, j, lim))))
+        u = arc_parameters(curve, grid, law.s0_mm[piece] + local)
+        ratio = motion_ratio(frames(curve, u), v, a, j, lim)
+        # at a zero of C' (a rest, or a removable zero) the frame is rounding noise
+        ratio[curve.speed(u) <= zero_speed] = 0.0
+        worst = max(worst, float(np.max(ratio)))
     return worst
 
 
