@@ -86,6 +86,11 @@ LANDING_MARGIN_REL = 1e-8  # the first run's sigma lies this far (relative) abov
 BUMP_PERIODS = 32
 BUMP_MAX_SLOWDOWN = 1e-4
 CHORD_ITERATIONS = 200
+# A step whose bracket grows past the curve's whole parameter range finds no arc or chord of
+# its length: what is left of the curve is shorter than the step, as where the last control
+# points coincide and a run's targets outrun the arc (an overshooting sigma, taylor1's drift).
+# The step ends there, on the curve's still end (the landing then takes a lower sigma), instead
+# of doubling on to an infinite u (a NaN point, refused by the motion guard).
 # rk2c: a step across a knot whose chord is still this far (relative) from its target after two
 # corrections is solved exactly (a knot where |C'| jumps: a rational curve of degree 1)
 KNOT_CHORD_REL = 1e-9
@@ -199,9 +204,12 @@ def _arc_step(knots, coef, degree, n_ctrl, u, ds, guess, span):
     arc_lo = 0.0
     hi = guess
     arc_hi = _arc(knots, coef, degree, n_ctrl, u, u + hi, tol, span)
+    u_range = knots[knots.size - 1] - knots[0]
     for _ in range(CHORD_ITERATIONS):
         if arc_hi >= ds:
             break
+        if hi > u_range:  # the curve left is shorter than the step: see CHORD_ITERATIONS
+            return hi
         lo = hi
         arc_lo = arc_hi
         hi *= 2.0
@@ -245,7 +253,10 @@ def _leg_step(knots, coef, degree, n_ctrl, u, px, py, pz, ds, guess, span):
     width = du_arc * (ds - chord) / ds + 4.0 * EPS * (abs(u) + du_arc)
     arc = ds
     lo = du_arc
+    u_range = knots[knots.size - 1] - knots[0]
     for _ in range(CHORD_ITERATIONS):
+        if lo > u_range:  # the curve left is shorter than the step: see CHORD_ITERATIONS
+            return du_arc
         hi = lo + width
         span = find_span(knots, degree, n_ctrl, u + hi, span)
         cx, cy, cz, _, _, _ = point_d1(knots, coef, degree, span, u + hi)
@@ -269,12 +280,15 @@ def _chord_step(knots, coef, degree, n_ctrl, u, px, py, pz, ds, lo, guess, span)
     g_lo = math.sqrt((cx - px) ** 2 + (cy - py) ** 2 + (cz - pz) ** 2) - ds if lo > 0.0 else -ds
     hi = guess
     g_hi = -ds
+    u_range = knots[knots.size - 1] - knots[0]
     for _ in range(CHORD_ITERATIONS):
         span = find_span(knots, degree, n_ctrl, u + hi, span)
         cx, cy, cz, _, _, _ = point_d1(knots, coef, degree, span, u + hi)
         g_hi = math.sqrt((cx - px) ** 2 + (cy - py) ** 2 + (cz - pz) ** 2) - ds
         if g_hi >= 0.0:
             break
+        if hi - lo0 > u_range:  # the curve left is shorter than the step: see CHORD_ITERATIONS
+            return hi
         lo = hi
         g_lo = g_hi
         hi = lo0 + 2.0 * (hi - lo0)
@@ -683,6 +697,15 @@ def _last_flat_periods(t0, a0, jk, v0, duration, t_a, t_b, n, periods):
     return -1, 0.0
 
 
+def _within(sigma: float, bracket: list[float]) -> float:
+    """sigma if it lies inside the landing's bracket (below, above) of the root, else the
+    bracket's middle (its upper end at most 1)."""
+    below, above = bracket
+    if below < sigma < above:
+        return sigma
+    return 0.5 * (below + min(above, 1.0))
+
+
 @dataclass(frozen=True)
 class _Landing:
     """How one stretch landed: sigma, the bump and its depth, the kernel runs it took (a run
@@ -822,14 +845,23 @@ class _Stretch:
             runs += 1.0
         # d(residual)/d(sigma) ~ -total: Newton, then secant steps, never above 1 (that would
         # raise the speed). A resident stretch keeps the best run after the first aside, so
-        # that a last run that made things worse (rounding) costs a copy back.
+        # that a last run that made things worse (rounding) costs a copy back. The sigmas run
+        # bracket the root (below it: r > 0 before the end; above: r < 0 or past the end), and
+        # a step out of the bracket bisects it instead: where the steps run out of curve
+        # (control points coincide at the end) r is flat above the root, and a secant through
+        # two such runs once proposed sigma = -0.008, a stretch that never moved.
         sigma_prev, r_prev = sigma, r
+        bracket = [0.0, 1.0 if self.past_end or r < 0.0 else math.inf]
         best = (self.past_end, abs(r), sigma)  # a run past the end ranks below any other
         kept = None
-        sigma = min(sigma + r / total, 1.0)
+        sigma = _within(min(sigma + r / total, 1.0), bracket)
         while abs(r_prev) > tol or best[0]:
             r = self.run(sigma)
             runs += 1.0
+            if self.past_end or r < 0.0:
+                bracket[1] = min(bracket[1], sigma)
+            else:
+                bracket[0] = max(bracket[0], sigma)
             improved = (self.past_end, abs(r)) < best[:2]
             if improved:
                 best = (self.past_end, abs(r), sigma)
@@ -840,8 +872,9 @@ class _Stretch:
                 break
             if self.resident:
                 kept = (sigma, self.u[:n].copy(), self.pts[:n].copy())
-            sigma, sigma_prev, r_prev = (min(sigma - r * (sigma - sigma_prev) / (r - r_prev), 1.0),
-                                         sigma, r)
+            sigma, sigma_prev, r_prev = (
+                _within(min(sigma - r * (sigma - sigma_prev) / (r - r_prev), 1.0), bracket),
+                sigma, r)
         if sigma != best[2]:  # the last run was not the best one: back to the best
             sigma = best[2]
             if kept is not None and kept[0] == sigma:
@@ -857,7 +890,7 @@ class _Stretch:
         for _ in range(LANDING_MAX_RUNS):
             if not self.past_end:
                 break
-            sigma *= 1.0 - max(cut, 16.0 * EPS)
+            sigma *= 1.0 - min(max(cut, 16.0 * EPS), 0.5)
             self.run(sigma)
             runs += 1.0
             cut *= 2.0

@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
 
 from nurbsfeed.analysis.check import check_files, render_check
 from nurbsfeed.analysis.common import curve_blocks
@@ -24,6 +26,7 @@ from nurbsfeed.readers.json_curves import read_json_curves
 from nurbsfeed.safety import MotionGuard
 from tests.bench.dense_curves import dense_curves
 from tests.motion_from_positions import path_motion
+from tests.test_degenerate import EXAMPLES, degenerate_curves
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLES = sorted((ROOT / "samples").iterdir())
@@ -250,21 +253,54 @@ def test_check_under_the_paper_model_shows_no_path_rows(tmp_path: Path) -> None:
 # control point, where s grows as (u - u0)^3, put law samples 1e-9 of u from the stop, where
 # kappa is rounding noise: kappa 5e20), 1.7e9 s and 3e20 s (a node where C' = 0 that the grid
 # passes at speed, a zero-length span's end or a removable zero at a knot: its frame is noise,
-# kappa 2e30, and its static limit 1e-19 mm/s). Refused as too long, or planning for minutes.
-# Now within 3x the paper model's cycle under the same limits (the path model's own cost: the
-# butterfly takes 1.38x, cam-63 2.6x; see docs/benchmarks.md).
+# kappa 2e30, and its static limit 1e-19 mm/s), 1.06e6 s (zero-length-end-span-jump: the jump
+# of kappa N at a knot beside a span of no length, rounding noise, set 2e-14 mm/s); and 23 s,
+# 13 s, 83 s, 12 s (brake-into-needle-peak, cubic-knot-step, cusp-departure-dip,
+# hook-beside-the-end: a low of the path limit between two key points, or a needle of kappa
+# hidden between the last node and a still end, left to a segment cap or a uniform slowdown
+# of the whole curve). Refused as too long, or planning for minutes. still-first-span-double-
+# knot was the paper model's: a first span of no length took the noise kappa of the knot after
+# it (7e13: 65 hours at 2.8e-11 mm/s). Now within 2x the paper model's cycle under the same
+# limits (the path model's own cost: the butterfly takes 1.38x, cam-63 2.6x; see
+# docs/benchmarks.md), and the paper model's within 10x the length at the feed.
 DEGENERATE = sorted((Path(__file__).parent / "data" / "path").glob("*.json"))
 
 
 @pytest.mark.parametrize("source", DEGENERATE, ids=lambda p: p.stem)
 def test_degenerate_curves_are_planned_sanely_and_keep_the_path_limits(source: Path) -> None:
     _, [(curve, feed)] = read_json_curves(source)
-    path = machine_from_mapping(PATH_PROFILE, "test").limits
-    lim = dataclasses.replace(path, feed_mm_s=min(path.feed_mm_s, feed))
-    paper = plan_curve(curve, dataclasses.replace(lim, jerk_model="paper"))
+    lim = dataclasses.replace(machine_from_mapping(PATH_PROFILE, "test").limits, feed_mm_s=feed)
+    paper = plan_curve(curve, dataclasses.replace(lim, jerk_model="paper"), max_curve_time_s=60.0)
+    assert paper.cycle_time_s <= 10.0 * float(paper.grid.s_mm[-1]) / feed
     plan = plan_curve(curve, lim, max_curve_time_s=60.0)
-    assert plan.cycle_time_s <= 3.0 * paper.cycle_time_s, (plan.cycle_time_s, paper.cycle_time_s)
+    assert plan.cycle_time_s <= 2.0 * paper.cycle_time_s, (plan.cycle_time_s, paper.cycle_time_s)
     result = interpolate(plan, "rk2c")
     worst = _worst_over_limits(result.points, result.period_s, lim)
     assert max(worst.values()) <= FROM_POSITIONS, worst
     MotionGuard(lim, source.stem).check(result.points)
+
+
+PATH_EXAMPLES = max(20, EXAMPLES // 3)
+
+
+@settings(max_examples=PATH_EXAMPLES, deadline=None, derandomize=PATH_EXAMPLES <= 100,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
+@given(degenerate_curves(), st.sampled_from([20.0, 100.0, 200.0]))
+def test_random_curves_keep_every_path_limit_at_a_sane_cycle(curve: NurbsCurve,
+                                                             feed_mm_s: float) -> None:
+    """Random curves with repeated control points, corners and extreme weights under the path
+    model: every quantity from the points within FROM_POSITIONS of its limit, the motion guard
+    passes them, and the cycle stays within 3x the paper model's (on 3,000 random curves the
+    worst was 2.05x, 1.19x at the median)."""
+    lim = dataclasses.replace(machine_from_mapping(PATH_PROFILE, "test").limits,
+                              feed_mm_s=feed_mm_s)
+    paper = plan_curve(curve, dataclasses.replace(lim, jerk_model="paper"))
+    plan = plan_curve(curve, lim)
+    assert plan.cycle_time_s <= 3.0 * paper.cycle_time_s, (plan.cycle_time_s, paper.cycle_time_s)
+    assume(plan.n_periods < 40_000)  # keep the example fast; long plans are no different
+    result = interpolate(plan, "rk2c")
+    assert np.isfinite(result.points).all()
+    if len(result.points) >= 4:
+        worst = _worst_over_limits(result.points, result.period_s, lim)
+        assert max(worst.values()) <= FROM_POSITIONS, worst
+    MotionGuard(lim, curve.name).check(result.points)

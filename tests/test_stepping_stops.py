@@ -17,10 +17,14 @@ from numpy.polynomial.legendre import leggauss
 from nurbsfeed.cli import main
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.interpolate import LEG_ARC_MAX, Interpolation, interpolate
-from nurbsfeed.machine import load_machine
+from nurbsfeed.machine import load_machine, machine_from_mapping
 from nurbsfeed.pipeline import plan_block
+from nurbsfeed.planning.planner import plan_curve
 from nurbsfeed.program import CurveBlock
 from nurbsfeed.readers import read_program
+from nurbsfeed.readers.json_curves import read_json_curves
+from nurbsfeed.safety import MotionGuard
+from tests.test_path_model import PAPER_LIMITS, PATH_PROFILE
 
 DATA = Path(__file__).parent / "data" / "stepping-stops"
 MACHINE = load_machine("default", {})
@@ -98,3 +102,24 @@ def test_the_findings_conversions_pass_check(tmp_path: Path, name: str) -> None:
     checked = CliRunner().invoke(main, ["check", str(DATA / name), str(target)])
     assert checked.exit_code == 0, checked.output
     assert "result: OK: 0 violation(s)" in checked.output
+
+
+@pytest.mark.parametrize("method", ["rk2c", "rk4"])
+def test_steps_that_run_out_of_curve_stay_on_its_end(method: str) -> None:
+    """The last four control points coincide: the arc ends at u = 0.9, where |C'| vanishes like
+    (0.9 - u)^2, and a run whose targets outrun it (sigma a hair too high) stepped into the span
+    of no length, where no arc or chord reaches the target: the bracket doubled 200 times to an
+    infinite u and point 1202 of 1204 was NaN (found by a path-model property, at 200 mm/s;
+    refused by the motion guard). Now such a step stays on the end and the landing lowers
+    sigma: every point is finite, on the curve, before its end, and the motion keeps the
+    limits."""
+    _, [(curve, feed)] = read_json_curves(DATA / "coincident-end-points.json")
+    assert feed == 200.0
+    for profile in (PATH_PROFILE, PAPER_LIMITS):
+        lim = machine_from_mapping({**profile, "max_feed_mm_s": feed}, "test").limits
+        run = interpolate(plan_curve(curve, lim), method)
+        assert np.isfinite(run.points).all() and np.isfinite(run.u).all()
+        assert np.allclose(run.points, curve.point(run.u), rtol=0, atol=1e-9)
+        assert np.all(np.diff(run.u) >= 0.0) and np.all(run.u[:-1] < curve.u_max)
+        assert np.array_equal(run.points[-1], curve.points[-1])
+        MotionGuard(lim, curve.name).check(run.points)

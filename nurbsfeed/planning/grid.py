@@ -126,7 +126,8 @@ def _samples(knots, coef, degree, breaks, spacing_mm):
     closes the list. Returns u, kappa, |C'| at the nodes (M,), C and the unit tangent there
     (M, 3; the tangent from the span after a knot, 0 where C' = 0). At an interior
     knot kappa is the higher of its limits from the two sides (it jumps where the curve is
-    only C1), so that no node understates the curvature around it."""
+    only C1), so that no node understates the curvature around it; a side where |C'| is below
+    ZERO_SPEED_REL of the other's does not count (its kappa is rounding noise)."""
     n_ctrl = coef.shape[0]
     n_spans = breaks.size - 1
     counts = np.empty(n_spans, dtype=np.int64)
@@ -164,8 +165,12 @@ def _samples(knots, coef, degree, breaks, spacing_mm):
         _unit_tangent(c, pts, tan, q)
         if span != before and q > 0:  # a knot: kappa may jump there, take the higher side
             c = point_d2(knots, coef, degree, before, u_nodes[q])
-            left, _ = curvature(c[3], c[4], c[5], c[6], c[7], c[8])
-            if left > kappa[q] or kappa[q] != kappa[q]:
+            left, left_speed = curvature(c[3], c[4], c[5], c[6], c[7], c[8])
+            # ... where the side before moves: after a span of no length (coincident control
+            # points) its kappa is rounding noise (7e13 at a knot where the curve starts
+            # moving, filled back over the still span: 2.8e-11 mm/s, 65 hours planned)
+            moves = left_speed > ZERO_SPEED_REL * speed[q] if speed[q] == speed[q] else True
+            if moves and (left > kappa[q] or kappa[q] != kappa[q]):
                 kappa[q] = left
     return u_nodes, kappa, speed, pts, tan
 
@@ -733,6 +738,14 @@ def _merge(knots, coef, degree, u, kappa, speed, pts, tan, extra, zero_speed):
 
 
 @jit
+def _tangent_chord_cos(tan, pts, moving, q, chord):
+    """The cosine between the unit tangent at node `moving` and the chord from node q to q + 1."""
+    return ((tan[moving, 0] * (pts[q + 1, 0] - pts[q, 0])
+             + tan[moving, 1] * (pts[q + 1, 1] - pts[q, 1])
+             + tan[moving, 2] * (pts[q + 1, 2] - pts[q, 2])) / chord)
+
+
+@jit
 def _refine_where_kappa_jumps_or_turns(knots, coef, degree, u, kappa, speed, pts, tan,
                                        kappa_floor, zero_speed, floor_mm):
     """Step 4b: halve every interval across which kappa (above kappa_floor) changes by more than
@@ -764,13 +777,23 @@ def _refine_where_kappa_jumps_or_turns(knots, coef, degree, u, kappa, speed, pts
                 split[q] = True
                 n_split += 1
                 continue
-            if speed[q] <= zero_speed or speed[q + 1] <= zero_speed:
-                continue  # C' = 0 at an end of the interval (a stop, a curve end): no tangent
+            still_q = speed[q] <= zero_speed
+            still_next = speed[q + 1] <= zero_speed
+            if still_q and still_next:
+                continue  # C' = 0 at both ends of the interval: no tangent
             chord = math.sqrt((pts[q + 1, 0] - pts[q, 0]) ** 2 + (pts[q + 1, 1] - pts[q, 1]) ** 2
                               + (pts[q + 1, 2] - pts[q, 2]) ** 2)
             if chord <= floor_mm:
                 continue  # no length: nothing between the nodes to plan for
-            cos = tan[q, 0] * tan[q + 1, 0] + tan[q, 1] * tan[q + 1, 1] + tan[q, 2] * tan[q + 1, 2]
+            if still_q or still_next:
+                # C' = 0 at one end (a stop, a curve end): the tangent at the other against the
+                # chord (a hook of 0.14 um between the last node and a still end once hid a
+                # kappa of 5e6 from the grid)
+                moving = q + 1 if still_q else q
+                cos = _tangent_chord_cos(tan, pts, moving, q, chord)
+            else:
+                cos = (tan[q, 0] * tan[q + 1, 0] + tan[q, 1] * tan[q + 1, 1]
+                       + tan[q, 2] * tan[q + 1, 2])
             explained = TURN_EXPLAINED * high * chord + TURN_SLACK_RAD
             # 1 - cos x >= x^2/2 - x^4/24: below that the turn is explained, without an acos
             if 1.0 - cos <= explained * explained * (0.5 - explained * explained / 24.0):

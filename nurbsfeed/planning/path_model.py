@@ -31,7 +31,7 @@ from nurbsfeed.planning.limits import Limits
 # The S-curve's own acceleration and jerk, as a share of the lowest limit they add to: the
 # rest is left for the terms the curve adds where the S-curve accelerates (kappa^2 v^3 beside
 # j = -J along the path, kappa v^2 N_x beside a T_x per axis); what they still break is removed
-# by the planner's uniform slowdown (`planner.path_slowdown`). 0.75 gave the shortest cycles of
+# by the planner's uniform slowdown (`planner.path_excess`). 0.75 gave the shortest cycles of
 # 0.6, 0.75, 0.85 and 1.0 on the samples and dense test curves.
 SCURVE_SHARE = 0.75
 STRAIGHT_REL = 1e-12  # |C' x C''| below this share of |C'| |C''|: the curve is straight there
@@ -150,25 +150,31 @@ def motion_ratio(f: Frames, v: np.ndarray, a: np.ndarray, j: np.ndarray,
     return ratio
 
 
-def jump_limits(curve: NurbsCurve, u_breaks: np.ndarray, lim: Limits) -> np.ndarray:
+def jump_limits(curve: NurbsCurve, u_breaks: np.ndarray, lim: Limits,
+                zero_speed: float = 0.0) -> np.ndarray:
     """At interior knots u_breaks (K,): the speed at which the jump D of kappa N there, read
     over one period as v^2 |D| / T, keeps J_n and every axis's jerk (inf where kappa N does
     not jump). kappa N = (C'' |C'|^2 - (C' . C'') C') / |C'|^4 on each side; the left side is
-    the span before the knot, evaluated one ulp below it."""
+    the span before the knot, evaluated one ulp below it. A side where |C'| <= zero_speed has
+    no frame to jump from (kappa N there is rounding noise, 1e15 beside a span of no length
+    once set a limit of 2e-14 mm/s): inf, the knot is a zero of C' that the grid handles (a
+    rest where the path turns back, kappa from inside the spans where it goes on)."""
     if u_breaks.size == 0:
         return np.empty(0)
 
-    def kappa_n(u: np.ndarray) -> np.ndarray:
+    def kappa_n(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         _, c1, c2 = curve.derivatives(u)
         sp2 = _dot(c1, c1)
         safe = np.where(sp2 > 0.0, sp2, 1.0)
-        return np.where((sp2 > 0.0)[:, None],
-                        (c2 * safe[:, None] - _dot(c1, c2)[:, None] * c1) / (safe**2)[:, None],
-                        0.0)
+        return (np.where((sp2 > 0.0)[:, None],
+                         (c2 * safe[:, None] - _dot(c1, c2)[:, None] * c1) / (safe**2)[:, None],
+                         0.0),
+                np.sqrt(sp2))
 
-    right = kappa_n(u_breaks)
-    left = kappa_n(np.nextafter(u_breaks, -np.inf))
-    jump = right - left
+    right, right_speed = kappa_n(u_breaks)
+    left, left_speed = kappa_n(np.nextafter(u_breaks, -np.inf))
+    framed = (np.minimum(left_speed, right_speed) > zero_speed)[:, None]
+    jump = (right - left) * framed
     t = lim.period_s
     with np.errstate(divide="ignore"):
         size = np.sqrt(_dot(jump, jump))

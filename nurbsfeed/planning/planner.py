@@ -61,8 +61,11 @@ MAX_STRETCH_PERIODS = 1e15  # whole periods of one stretch: far below int64's ra
 HOLD_ROOM = 0.05  # holds leave at least this fraction of a segment for its transitions
 
 PEAK_NODE_ROUNDS = 3  # times the grid gains nodes where a segment's peak hid between two
-SHOULDER_ROUNDS = 4  # times key points are added where a hold cannot (or should not) help
+SHOULDER_ROUNDS = 8  # times key points are added where a hold cannot (or should not) help
 HOLD_MAX_PERIODS = 16  # a hold longer than this (in time) becomes a shoulder key point
+# the path model's own minima of the limit that become key points (`_binding_minima`)
+MINIMUM_WINDOW = 3  # nodes on each side
+MINIMUM_RISE = 2.0  # the rise of the limit within them, on both sides (or to a neighbour)
 KIND_END, KIND_PEAK, KIND_CORNER, KIND_FEED, KIND_HOLD, KIND_CUSP, KIND_SHOULDER = range(7)
 KIND_NAMES = {KIND_END: "end", KIND_PEAK: "peak", KIND_CORNER: "corner", KIND_FEED: "feed",
               KIND_HOLD: "hold", KIND_CUSP: "cusp", KIND_SHOULDER: "shoulder"}
@@ -209,6 +212,13 @@ def _key_points(kappa, raw_limit, fcap, stop_index, stop_cos, peak_index, feed_n
     return limit, key_node, key_kind, nominal, cap, n_peaks
 
 
+def _node_excess(key_node: np.ndarray, limit: np.ndarray, v_nodes: np.ndarray) -> float:
+    """The largest v / limit over the nodes that are not keys (0 if none is checked)."""
+    checked = limit > 0.0
+    checked[key_node] = False
+    return float((v_nodes[checked] / limit[checked]).max()) if checked.any() else 0.0
+
+
 def _whole_periods(v_key, key_t, key_node, limit, v_nodes, period_s, slowdown):
     """Step 6: the uniform slowdown (whatever the key points could not fix: the largest v / limit
     over the nodes that are not keys, at least the slowdown given), the keys where the motion
@@ -216,10 +226,7 @@ def _whole_periods(v_key, key_t, key_node, limit, v_nodes, period_s, slowdown):
     A stretch that would last more than MAX_STRETCH_PERIODS periods, or not a finite number,
     gets -1 (the caller refuses the curve): rounded into int64 it could wrap to a small count.
     (numpy, not a kernel: a few operations per curve, cheaper than loading one more kernel.)"""
-    checked = limit > 0.0
-    checked[key_node] = False
-    if checked.any():
-        slowdown = max(slowdown, float((v_nodes[checked] / limit[checked]).max()))
+    slowdown = max(slowdown, _node_excess(key_node, limit, v_nodes))
     piece_key = np.concatenate(([0], np.flatnonzero(v_key[1:-1] == 0.0) + 1, [v_key.size - 1]))
     piece_periods = np.zeros(piece_key.size - 1, dtype=np.int64)
     piece_scale = np.ones(piece_key.size - 1)
@@ -304,6 +311,9 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
             last_up_node = -1
             first_down_node = -1
             lowest = np.inf
+            lowest_up = np.inf
+            lowest_mid = np.inf
+            lowest_down = np.inf
             up = False
             down = False
             mid = False
@@ -316,13 +326,16 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
                     up = True
                     first_up = min(first_up, s)
                     last_up_node = node
+                    lowest_up = min(lowest_up, limit[node])
                 elif s > decel_start:
                     down = True
                     last_down = max(last_down, s)
                     if first_down_node < 0:
                         first_down_node = node
+                    lowest_down = min(lowest_down, limit[node])
                 else:
                     mid = True
+                    lowest_mid = min(lowest_mid, limit[node])
             if not (up or down or mid):
                 continue
             any_bad = True
@@ -332,7 +345,16 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
                 new_start = max(new_start, first_up - key_s[seg])
             if down and v[seg + 1] > 0.0:
                 new_end = max(new_end, key_s[seg + 1] - last_down)
+            # the cap falls to the lowest limit of the nodes a hold cannot help (those of the
+            # cruise, and beside a key at rest), not to that of nodes a hold does help: a curve
+            # that cruised past one node too fast and then braked into a needle peak capped its
+            # whole 28 mm segment at the peak's 1.3 mm/s (20 s for 1.5 s)
             lower_cap = mid or (up and v[seg] == 0.0) or (down and v[seg + 1] == 0.0)
+            cap_to = lowest_mid
+            if up and v[seg] == 0.0:
+                cap_to = min(cap_to, lowest_up)
+            if down and v[seg + 1] == 0.0:
+                cap_to = min(cap_to, lowest_down)
             if up and (v[seg] == 0.0 or first_up - key_s[seg] > v[seg] * max_hold_s):
                 shoulder_at[seg] = last_up_node
             elif down and (v[seg + 1] == 0.0
@@ -347,8 +369,9 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
                 hold_end[seg] = new_end
             else:
                 lower_cap = True
-            if lower_cap and 0.0 < lowest < cap[seg]:
-                cap[seg] = lowest
+                cap_to = lowest
+            if lower_cap and 0.0 < cap_to < cap[seg]:
+                cap[seg] = cap_to
                 changed = True
         if not any_bad:
             break
@@ -439,12 +462,47 @@ def _hidden_slowdown(curve: NurbsCurve, grid: Grid, lim: Limits, feed_u, feed_mm
     return max(1.0, float(ratio.max()))
 
 
-def _path_limit(curve: NurbsCurve, grid: Grid, lim: Limits, raw_limit: np.ndarray):
+def _binding_minima(limit: np.ndarray, raw_limit: np.ndarray) -> np.ndarray:
+    """Nodes where the path model's own terms set the limit (below the paper's raw limit) and
+    it is low: the lowest of MINIMUM_WINDOW nodes on each side (stops, limit 0, aside), with
+    the limit rising to MINIMUM_RISE times it on both sides within them (a minimum), or the low
+    side of a step (a neighbour's limit MINIMUM_RISE times it: kappa' jumps at a cubic's knots
+    with its third derivative). The paper's limit is lowest at curvature peaks, which are key
+    points; the path model's has lows of its own (kappa' and the per-axis terms), and one
+    between two key points left the fix rounds to cap the whole segment at it, or to slow the
+    whole curve: a curve reached a step from 24.7 to 0.55 mm/s at 3.4 mm/s and was slowed 6.3
+    times (13 s for the paper model's 1.6 s). Shallower lows are left to the fix rounds and the
+    shoulders: a key point holds the acceleration at zero, and one at every 2 % low made the
+    dense test curves up to 20 % slower."""
+    w = MINIMUM_WINDOW
+    floor = np.where(limit > 0.0, limit, np.inf)
+    padded_min = np.pad(floor, w, mode="edge")
+    padded_max = np.pad(limit, w, mode="edge")
+    windows_min = np.lib.stride_tricks.sliding_window_view(padded_min, 2 * w + 1)
+    windows_max = np.lib.stride_tricks.sliding_window_view(padded_max, 2 * w + 1)
+    left_min = windows_min[:, :w].min(axis=1)
+    right_min = windows_min[:, w + 1:].min(axis=1)
+    rise = MINIMUM_RISE * limit
+    binding = (limit < raw_limit) & (limit > 0.0) & np.isfinite(limit)
+    minimum = ((left_min > limit) & (right_min >= limit)
+               & (windows_max[:, :w].max(axis=1) >= rise)
+               & (windows_max[:, w + 1:].max(axis=1) >= rise))
+    step = (windows_max[:, w - 1] >= rise) | (windows_max[:, w + 1] >= rise)
+    keys = binding & (minimum | step)
+    keys[[0, -1]] = False
+    return np.flatnonzero(keys)
+
+
+def _path_limit(curve: NurbsCurve, grid: Grid, lim: Limits, raw_limit: np.ndarray,
+                caps: np.ndarray | None = None):
     """The path model's pointwise limit at the nodes (the static terms, `path_model.
-    static_limit`, and the speed at knots where kappa N jumps) and the knots where that jump
-    sets the limit, which become key points: the law passes them at zero acceleration, at a
-    speed no higher than their limit."""
+    static_limit`, the speed at knots where kappa N jumps, and caps (M,) from `path_excess`),
+    and the nodes that become key points (the law passes them at zero acceleration, at a speed
+    no higher than their limit): the knots where that jump sets the limit, and the limit's own
+    minima (`_binding_minima`)."""
     static = static_limit(frames(curve, grid.u), lim)
+    if caps is not None:
+        static = np.minimum(static, caps)
     # where C' = 0 (a removable zero the grid passes at speed) the frame is rounding noise
     # (kappa 2e30 at a knot of |C'| 5e-14 once planned a curve at 3e20 s): the lower of the
     # neighbours' limits, as the grid takes kappa there from inside
@@ -463,13 +521,16 @@ def _path_limit(curve: NurbsCurve, grid: Grid, lim: Limits, raw_limit: np.ndarra
     nodes, breaks = nodes[inside], breaks[inside]
     on_node = grid.u[nodes] == breaks
     nodes, breaks = nodes[on_node], breaks[on_node]
-    at_jump = jump_limits(curve, breaks, lim)
+    at_jump = jump_limits(curve, breaks, lim, ZERO_SPEED_REL * float(speed.mean()))
     lower = at_jump < limit[nodes]
     limit[nodes[lower]] = at_jump[lower]
-    return limit, nodes[lower].astype(np.int64)
+    keys = np.union1d(nodes[lower], _binding_minima(limit, raw_limit))
+    return limit, keys.astype(np.int64)
 
 
 PATH_SAMPLES_PER_PERIOD = 2  # the path model's final check samples the law this densely
+PATH_FIX_ROUNDS = 3  # plans again with the limit lowered where the law broke a path limit ...
+PATH_FIX_REL = 0.02  # ... while it does so by more than this
 PATH_CHUNK = 1 << 16  # samples per chunk of that check: memory stays bounded on long curves
 
 
@@ -509,27 +570,45 @@ def arc_parameters(curve: NurbsCurve, grid: Grid, s_mm: np.ndarray) -> np.ndarra
     return u
 
 
-def path_slowdown(curve: NurbsCurve, grid: Grid, law: TimeLaw, lim: Limits) -> float:
-    """The uniform slowdown (>= 1) that keeps every path-model limit where the law goes: the
-    law sampled PATH_SAMPLES_PER_PERIOD times a period, each sample's parameter found from its
-    arc length on the grid (`arc_parameters`), and `path_model.motion_ratio` there, except at
-    zeros of C' (rests and removable zeros, where the frame is rounding noise). The key points
-    and the fix rounds keep the static terms; this covers what the S-curve's own acceleration
-    and jerk add (3 kappa v a across the path, -kappa^2 v^3 + j along it, a T_x per axis)."""
+def path_excess(curve: NurbsCurve, grid: Grid, law: TimeLaw,
+                lim: Limits) -> tuple[float, np.ndarray]:
+    """Where the law breaks a path-model limit: the uniform slowdown (>= 1) that would keep
+    them all, and per node (M,) the speed that would keep them where the law passes next to it
+    (inf elsewhere). The law is sampled PATH_SAMPLES_PER_PERIOD times a period, each sample's
+    parameter found from its arc length on the grid (`arc_parameters`), `path_model.
+    motion_ratio` there, except at zeros of C' (rests and removable zeros, where the frame is
+    rounding noise); a sample too fast by lambda asks v / lambda of both nodes around it. The
+    key points and the fix rounds keep the static terms; this covers what the S-curve's own
+    acceleration and jerk add (3 kappa v a across the path, -kappa^2 v^3 + j along it, a T_x
+    per axis)."""
     worst = 1.0
+    caps = np.full(grid.u.size, np.inf)
     if law.duration_s <= 0.0:
-        return worst
+        return worst, caps
     n = max(2, int(math.ceil(law.duration_s / lim.period_s * PATH_SAMPLES_PER_PERIOD)) + 1)
     zero_speed = ZERO_SPEED_REL * float(curve.speed(grid.u).mean())
     for start in range(0, n, PATH_CHUNK):
         t = np.arange(start, min(n, start + PATH_CHUNK)) * (law.duration_s / (n - 1))
         piece, local, v, a, j = law.sample(t)
-        u = arc_parameters(curve, grid, law.s0_mm[piece] + local)
+        s_mm = law.s0_mm[piece] + local
+        u = arc_parameters(curve, grid, s_mm)
         ratio = motion_ratio(frames(curve, u), v, a, j, lim)
         # at a zero of C' (a rest, or a removable zero) the frame is rounding noise
         ratio[curve.speed(u) <= zero_speed] = 0.0
         worst = max(worst, float(np.max(ratio)))
-    return worst
+        bad = np.flatnonzero(ratio > 1.0)
+        if bad.size:
+            node = np.clip(np.searchsorted(grid.s_mm, s_mm[bad], side="right") - 1, 0,
+                           grid.u.size - 2)
+            ask = v[bad] / ratio[bad]
+            np.minimum.at(caps, node, ask)
+            np.minimum.at(caps, node + 1, ask)
+    return worst, caps
+
+
+def _law(pieces: list[np.ndarray], key_t: np.ndarray, duration: float) -> TimeLaw:
+    t0, s0, v0, a0, jk = pieces
+    return TimeLaw.from_pieces(t0, s0, v0, a0, jk, key_t, duration)
 
 
 def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
@@ -573,13 +652,42 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
         if more.size == 0:
             break
         extra_u = np.union1d(extra_u, more)
-    t0, s0, v0, a0, jk = pieces
-    law = TimeLaw.from_pieces(t0, s0, v0, a0, jk, key_t, duration)
+    law = _law(pieces, key_t, duration)
+    excess = 1.0
+    if path:
+        # where the S-curves' own acceleration and jerk break a path limit, lower the limit
+        # there and plan again (PATH_FIX_ROUNDS at most, keeping the plan whose cycle after the
+        # uniform slowdown that is left is the shortest): one needle of a 0.14 um hook beside
+        # an end once slowed a whole 58 mm curve 6.3 times
+        excess, caps = path_excess(curve, grid, law, lim)
+        left = max(excess, _node_excess(key_node, limit, v_nodes),
+                   _hidden_slowdown(curve, grid, lim, feed_u, feed_mm_s, peak, hidden_peak_s))
+        best = (law.duration_s * left, excess, law, limit, key_node, key_kind, nominal,
+                n_peaks, v, peak, hold_start, hold_end, v_nodes, rounds, hidden_peak_s)
+        path_caps = caps
+        for _ in range(PATH_FIX_ROUNDS):
+            if excess <= 1.0 + PATH_FIX_REL:
+                break
+            raw_limit, fixed_keys = _path_limit(curve, grid, lim,
+                                                speed_limit(grid.kappa_1_mm, lim, fcap),
+                                                path_caps)
+            (limit, key_node, key_kind, nominal, n_peaks, v, peak, hold_start, hold_end, pieces,
+             key_t, duration, v_nodes, rounds, hidden_peak_s) = _plan_on_grid(
+                grid, raw_limit, fcap, feed_nodes, kappa0, lim, acc, jerk, fixed_keys)
+            law = _law(pieces, key_t, duration)
+            excess, caps = path_excess(curve, grid, law, lim)
+            left = max(excess, _node_excess(key_node, limit, v_nodes),
+                       _hidden_slowdown(curve, grid, lim, feed_u, feed_mm_s, peak, hidden_peak_s))
+            if law.duration_s * left < best[0]:
+                best = (law.duration_s * left, excess, law, limit, key_node, key_kind, nominal,
+                        n_peaks, v, peak, hold_start, hold_end, v_nodes, rounds, hidden_peak_s)
+            path_caps = np.minimum(path_caps, caps)
+        (_, excess, law, limit, key_node, key_kind, nominal, n_peaks, v, peak, hold_start,
+         hold_end, v_nodes, rounds, hidden_peak_s) = best
     if not law.duration_s <= max_curve_time_s:
         raise CurveError(_too_long(law.duration_s, max_curve_time_s))
-    slowdown = _hidden_slowdown(curve, grid, lim, feed_u, feed_mm_s, peak, hidden_peak_s)
-    if path:
-        slowdown = max(slowdown, path_slowdown(curve, grid, law, lim))
+    slowdown = max(excess, _hidden_slowdown(curve, grid, lim, feed_u, feed_mm_s, peak,
+                                            hidden_peak_s))
     slowdown, piece_key, piece_periods, piece_scale = _whole_periods(
         v, law.key_t_s, key_node, limit, v_nodes, lim.period_s, slowdown)
     if np.any(piece_periods < 0):
