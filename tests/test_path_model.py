@@ -261,7 +261,7 @@ def test_check_under_the_paper_model_shows_no_path_rows(tmp_path: Path) -> None:
 # of the whole curve). Refused as too long, or planning for minutes. still-first-span-double-
 # knot was the paper model's: a first span of no length took the noise kappa of the knot after
 # it (7e13: 65 hours at 2.8e-11 mm/s). Now within 2x the paper model's cycle under the same
-# limits (the path model's own cost: the butterfly takes 1.38x, cam-63 2.6x; see
+# limits (the path model's own cost: the butterfly takes 1.35x, cam-63 1.74x; see
 # docs/benchmarks.md), and the paper model's within 10x the length at the feed.
 DEGENERATE = sorted((Path(__file__).parent / "data" / "path").glob("*.json"))
 
