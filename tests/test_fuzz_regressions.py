@@ -135,3 +135,16 @@ def test_json_under_any_name_is_read_as_json_by_the_tool_and_the_oracle(tmp_path
     assert outcome.exit_code == 0 and outcome.problem is None, outcome
     gcode = (ROOT / "samples" / "linuxcnc-nurbs-xy.ngc").read_bytes()
     assert check_case(tmp_path, "in.ngc", gcode).problem is None
+
+
+def test_a_cruise_capped_at_a_nodes_limit_keeps_a_bump_between_nodes_within_it(
+        tmp_path: Path) -> None:
+    """Fuzz seed 35 (gcode family), under the default (paper-model) profile: a segment's cruise
+    capped at the limit of its fast cruise nodes alone (not the lowest of all its fast nodes,
+    as the path model now does) ran at 43.43 mm/s over a curvature bump between two nodes,
+    0.5 % above both (kappa 0.7816 against 0.7776 and 0.7779), and `check` measured the normal
+    jerk v^3 kappa^2 0.09 % above its limit and the rounding allowance. The oracle runs
+    convert and check as the fuzzer did."""
+    source = ROOT / "tests" / "data" / "peaks" / "cruise-over-a-bump-between-nodes.ngc"
+    outcome = check_case(tmp_path, "in.ngc", source.read_bytes())
+    assert outcome.exit_code == 0 and outcome.problem is None, outcome
