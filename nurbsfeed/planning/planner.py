@@ -253,15 +253,15 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
     ("down") or in the cruise. Up: hold the start speed until the first such node; down: hold
     the end speed from the last one; cruise, or an end at rest, or holds that would leave less
     than HOLD_ROOM of the segment: cap the segment at the lowest limit of its fast nodes (with
-    cap_to_cruise, the path model's: of those a hold cannot help). Returns key speeds (K,),
-    peak speeds (K-1,), the law's pieces (timelaw.chain_segments), the law's speed at every
-    node where it could exceed the limit (M,; 0 at the others and at key nodes), the number of fix rounds and, per segment (K-1,), where `plan_curve` should add a
-    key point (a shoulder; -1: none): the node where the law was too fast farthest from the
-    key it leaves (nearest to the key it comes to), when that key is at rest (a hold of speed 0
-    cannot help, so the segment's cap was lowered) or when the hold would last longer than
-    max_hold_s (a key speed held over a long stretch of a steep limit: a near cusp); and, per
-    segment, the stretch [from, to] of arc length where its peak speed hides between two nodes
-    ((K-1, 2); NaN: none).
+    cap_to_cruise, the path model's: of those a hold cannot help). Returns key speeds (K,), peak
+    speeds (K-1,), the law's pieces (timelaw.chain_segments), the law's speed at every node
+    where it could exceed the limit (M,; 0 at the others and at key nodes), the number of fix
+    rounds and, per segment (K-1,), where `plan_curve` should add a key point (a shoulder; -1:
+    none): the node where the law was too fast farthest from the key it leaves (nearest to the
+    key it comes to), when that key is at rest (a hold of speed 0 cannot help, so the segment's
+    cap was lowered) or when the hold would last longer than max_hold_s (a key speed held over a
+    long stretch of a steep limit: a near cusp); and, per segment, the stretch [from, to] of arc
+    length where its peak speed hides between two nodes ((K-1, 2); NaN: none).
     """
     key_s = s_mm[key_node]
     length = key_s[1:] - key_s[:-1]
