@@ -3,12 +3,21 @@ each, through the command line as the fuzzer saw them."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from nurbsfeed.analysis.check.projection import project_points_and_others
 from nurbsfeed.cli import main
+from nurbsfeed.interpolate import interpolate
+from nurbsfeed.machine import load_machine
+from nurbsfeed.pipeline import plan_block
+from nurbsfeed.planning.planner import KIND_CUSP
+from nurbsfeed.program import CurveBlock
+from nurbsfeed.readers import read_program
 from tests.fuzz.oracle import check_case
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -148,3 +157,35 @@ def test_a_cruise_capped_at_a_nodes_limit_keeps_a_bump_between_nodes_within_it(
     source = ROOT / "tests" / "data" / "peaks" / "cruise-over-a-bump-between-nodes.ngc"
     outcome = check_case(tmp_path, "in.ngc", source.read_bytes())
     assert outcome.exit_code == 0 and outcome.problem is None, outcome
+
+
+RETRACE = ROOT / "tests" / "data" / "check-turns" / "retrace-cusp-inch.json"
+
+
+def test_check_allows_for_the_arc_between_feet_as_near_at_a_retracing_cusp(
+        tmp_path: Path) -> None:
+    """Fuzz seed 36 (json family, json-3601136-539): an inch curve retraces itself through a
+    cusp; points written within rounding of it round onto points of the leg in, and `check`'s
+    walk kept three of them there (5 r of arc off): tangential jerk 1.06x on an output whose
+    trace keeps J_t (49,974 mm/s^3 on the true arc). Such a point's arc is known only to the
+    arc between its equally near feet, and the check now allows for it."""
+    outcome = check_case(tmp_path, "in.json", RETRACE.read_bytes())
+    assert outcome.exit_code == 0 and outcome.problem is None, outcome
+
+
+def test_only_points_at_the_retracing_cusp_have_another_foot() -> None:
+    """The allowance is local: a second foot as near is found only for the points written
+    within a few roundings of the cusp, and it lies across the cusp from the foot taken."""
+    machine = load_machine("default")
+    [block] = [item.in_mm() for item in read_program(RETRACE) if isinstance(item, CurveBlock)]
+    plan = plan_block(block, machine)
+    [cusp] = plan.key_u[plan.key_kind == KIND_CUSP]
+    written = np.round(interpolate(plan).points / 25.4, 6) * 25.4  # the inch output's 6 decimals
+    r = 0.5e-6 * math.sqrt(3.0) * 25.4
+    foot, dist, other = project_points_and_others(block.curve, written, 2.0 * r, r, 10.0 * r)
+    assert dist.max() <= r
+    at = block.curve.point(np.array([cusp]))[0]
+    two = np.flatnonzero(np.isfinite(other))
+    assert 1 <= two.size <= 8, two
+    assert np.all(np.linalg.norm(written[two] - at, axis=1) <= 10.0 * r)
+    assert np.all((foot[two] - cusp) * (other[two] - cusp) < 0.0)

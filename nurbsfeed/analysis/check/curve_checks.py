@@ -16,7 +16,7 @@ from nurbsfeed.analysis.check.estimates import (
     turning_rad,
 )
 from nurbsfeed.analysis.check.output_program import Section, decode_moves
-from nurbsfeed.analysis.check.projection import project_points
+from nurbsfeed.analysis.check.projection import project_points_and_others
 from nurbsfeed.analysis.check.report import Estimation, Findings
 from nurbsfeed.analysis.geometry import arc_length_mm, chord_errors_mm, curvature_1_mm
 from nurbsfeed.gcode.writer import round_ticks, written_decimals
@@ -216,8 +216,8 @@ def check_section(section: Section, block: CurveBlock, machine: Machine,
 
     # ---- geometry: project every point, deviation, ends, chord error, coverage ----
     dev_allow = r * (1.0 + NUMERIC_REL_TOL)
-    u, dist = project_points(curve, pos, 2.0 * r, dev_allow,
-                             ANCHOR_ROUNDINGS * (r + lim.chord_mm))
+    u, dist, other = project_points_and_others(curve, pos, 2.0 * r, dev_allow,
+                                               ANCHOR_ROUNDINGS * (r + lim.chord_mm))
     findings.measure("path-deviation", dist[1:], 0.0, dev_allow, lines)
     end_gap = float(np.linalg.norm(pos[-1] - curve.points[-1]))
     if end_gap > dev_allow:
@@ -239,6 +239,12 @@ def check_section(section: Section, block: CurveBlock, machine: Machine,
         kappa = curvature_1_mm(curve, ug)
         e = r * (1.0 + np.minimum(kappa * r, 1.0))
         s = arc_length_mm(curve, ug)
+        # a point as near another foot (a curve that retraces itself through a cusp, within
+        # rounding of it) is where either foot could be: its arc is known only that well
+        og = other[good]
+        two = np.flatnonzero(np.isfinite(og))
+        if two.size:
+            e[two] += np.abs(arc_length_mm(curve, og[two]) - s[two])
         cap_g = np.minimum(lim.feed_mm_s, np.maximum(feed_cap_mm_s(block, ug[:-1]),
                                                        feed_cap_mm_s(block, ug[1:])))
         findings.measure("coverage", np.diff(s), cap_g * np.diff(tg), e[:-1] + e[1:], pl[1:])

@@ -119,8 +119,9 @@ def _scan(knots, cw, degree, n_ctrl, a, b, u, dist2, span, tx, ty, tz, basis, db
 
 @jit
 def _project_kernel(knots, cw, degree, targets, u_first, u_last, back_mm, accept_mm, anchor_mm,
-                    u_out, dist_out):
-    """Foot parameters of targets (N, 3), in order: u_out (N,), distances dist_out (N,).
+                    u_out, dist_out, other_out):
+    """Foot parameters of targets (N, 3), in order: u_out (N,), distances dist_out (N,), and
+    other_out (N,): the minimum within accept_mm farthest from the foot (NaN: none other).
 
     The search walks forward from the origin, back_mm of arc behind the last anchored point
     (rounding may put a point slightly behind the one before), by steps that double up to
@@ -149,6 +150,13 @@ def _project_kernel(knots, cw, degree, targets, u_first, u_last, back_mm, accept
     left farther than anchor_mm is looked for again on a grid over the rest of the curve (a
     dropped stretch of moves puts the next point far ahead). A point within anchor_mm becomes
     the anchor (if it is not behind it).
+
+    Where the curve retraces itself through a cusp, a point written within rounding of the
+    cusp can round onto a point of the leg in: position cannot tell the legs apart, and the foot
+    can be on either (fuzz seed 36: three points kept on the leg in, 5 r of arc off). A point
+    whose foot does not move the anchor on therefore walks on to the reach (as a point with no
+    foot would) without changing its foot, gathering the other minima within accept_mm:
+    other_out lets the caller allow for the arc between them.
     """
     n_ctrl = cw.shape[0]
     basis = np.empty(degree + 1)
@@ -188,6 +196,8 @@ def _project_kernel(knots, cw, degree, targets, u_first, u_last, back_mm, accept
         dist2 = math.inf
         chosen = False
         n_minima = 0
+        other_lo = math.inf
+        other_hi = -math.inf
         reach_mm = 2.0 * (chord + back_mm)
         walked_mm = 0.0
         lo = origin
@@ -271,7 +281,10 @@ def _project_kernel(knots, cw, degree, targets, u_first, u_last, back_mm, accept
                 d2_lo = d2_hi
                 at_end = hi >= u_last
                 step = min(2.0 * step, step_max)
-            if candidate >= 0.0:
+            if candidate >= 0.0 and dc <= accept2:
+                other_lo = min(other_lo, candidate)
+                other_hi = max(other_hi, candidate)
+            if candidate >= 0.0 and not (chosen and lo > window_end and u <= anchor):
                 n_minima += 1
                 behind = False
                 if dc <= accept2 and candidate < anchor:
@@ -308,7 +321,8 @@ def _project_kernel(knots, cw, degree, targets, u_first, u_last, back_mm, accept
                     walked_mm = 0.0
                 elif chosen and knot_after > anchor:
                     break
-            if at_end or (n_minima > 0 and lo >= window_end and (chosen or walked_mm > reach_mm)):
+            if at_end or (n_minima > 0 and lo >= window_end
+                          and ((chosen and u > anchor) or walked_mm > reach_mm)):
                 break
         if n_minima == 0:
             dist2, span = _distance2(knots, cw, degree, n_ctrl, u, span, tx, ty, tz, basis,
@@ -327,6 +341,8 @@ def _project_kernel(knots, cw, degree, targets, u_first, u_last, back_mm, accept
                                    ty, tz, basis, dbasis, left, right, p, d)
         u_out[i] = u
         dist_out[i] = math.sqrt(dist2)
+        far = other_hi if other_hi - u >= u - other_lo else other_lo
+        other_out[i] = far if math.isfinite(far) and far != u else math.nan
         if dist_out[i] <= anchor_mm:
             pace = min(step_max, max(0.0, u - anchor))
             # the motion's parameter never runs back: a foot behind the anchor is rounding (the
@@ -343,18 +359,29 @@ def project_points(curve: NurbsCurve, targets: np.ndarray, back_mm: float, accep
 
     back_mm: how far behind the last anchored point a foot may be; accept_mm: a minimum this near
     counts as on the curve; anchor_mm: a point this near moves the search on."""
+    u, dist, _ = project_points_and_others(curve, targets, back_mm, accept_mm, anchor_mm)
+    return u, dist
+
+
+def project_points_and_others(curve: NurbsCurve, targets: np.ndarray, back_mm: float,
+                              accept_mm: float, anchor_mm: float
+                              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`project_points`, and per point the other foot within accept_mm farthest from the one
+    taken (NaN: none), found where a point does not move the walk on (`_project_kernel`)."""
     u = np.empty(len(targets))
     dist = np.empty(len(targets))
+    other = np.full(len(targets), np.nan)
     targets = np.ascontiguousarray(targets, dtype=float)
     _project_kernel(curve.knots, curve.homogeneous, curve.degree, targets, curve.u_min,
-                    curve.u_max, back_mm, accept_mm, anchor_mm, u, dist)
+                    curve.u_max, back_mm, accept_mm, anchor_mm, u, dist, other)
     off = np.flatnonzero(dist > accept_mm)
     if off.size:
         foot, nearest = nearest_on_curve(curve, targets[off])
         better = nearest < dist[off]
         u[off[better]] = foot[better]
         dist[off[better]] = nearest[better]
-    return u, dist
+        other[off[better]] = np.nan
+    return u, dist, other
 
 
 def nearest_on_curve(curve: NurbsCurve, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
