@@ -142,7 +142,9 @@ def machine_from_mapping(data: Any, where: str, places: Mapping[str, Location] |
     known = set(FLOAT_KEYS) | set(INT_KEYS) | {"jerk_model"}
     for key in data:
         if key not in known:
-            raise ProfileError(f"unknown key '{key}' (known keys: {', '.join(sorted(known))})",
+            # repr: a key's newline or control character must not reach the message raw
+            shown = repr(key) if len(repr(key)) <= 60 else repr(key)[:57] + "..."
+            raise ProfileError(f"unknown key {shown} (known keys: {', '.join(sorted(known))})",
                                places.get(key, here))
     values: dict[str, float | int] = {}
     for key in FLOAT_KEYS + INT_KEYS:

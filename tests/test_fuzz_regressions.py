@@ -3,6 +3,7 @@ each, through the command line as the fuzzer saw them."""
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -189,3 +190,28 @@ def test_only_points_at_the_retracing_cusp_have_another_foot() -> None:
     assert 1 <= two.size <= 8, two
     assert np.all(np.linalg.norm(written[two] - at, axis=1) <= 10.0 * r)
     assert np.all((foot[two] - cusp) * (other[two] - cusp) < 0.0)
+
+
+@pytest.mark.parametrize("key", ["\name", "a\u0007b", "x\udbf2y", "\u2028"])
+def test_an_unknown_json_key_is_shown_escaped_on_one_line(tmp_path: Path, key: str) -> None:
+    """Fuzz seed 37 (json family, json-3701122-92): a curve key written "\\name" in JSON is a
+    newline and "ame"; the unknown-key message printed it raw, a message of two lines (and any
+    control character or lone surrogate reached the terminal as it was)."""
+    curve = {"degree": 1, "knots": [0, 0, 1, 1], "control_points": [[0, 0], [1, 0]], key: 1}
+    for document in ({"curves": [curve]}, {"curves": [{k: v for k, v in curve.items()
+                                                       if k != key}], key: 1}):
+        message = refused(tmp_path, json.dumps(document), "in.json")
+        assert "\n" not in message and "\r" not in message and "\u2028" not in message
+        assert f"unknown key {key!r}" in message
+
+
+def test_an_unknown_profile_key_is_shown_escaped_on_one_line(tmp_path: Path) -> None:
+    """The same in a machine profile: a YAML key "odd\\nkey" printed raw split the message."""
+    profile = tmp_path / "p.yaml"
+    profile.write_text((ROOT / "configs" / "default.yaml").read_text()
+                       + '"odd\\nkey\\x07": 1\n')
+    result = CliRunner().invoke(main, ["convert", str(ROOT / "samples" / "circle.json"),
+                                       "-m", str(profile), "-o", str(tmp_path / "out.nc")])
+    assert result.exit_code == 2
+    message = result.stderr.strip()
+    assert "\n" not in message and "unknown key 'odd\\nkey\\x07'" in message

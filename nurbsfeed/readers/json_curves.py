@@ -330,7 +330,7 @@ def _survey(source: InputFile) -> _Survey:
     if "curves" in top_at:  # (a single curve object's keys are checked as curves[0]'s)
         unknown = sorted(set(top_at) - FILE_KEYS)
         if unknown:
-            raise InputError(f"unknown key '{unknown[0]}' (known: curves, units)",
+            raise InputError(f"unknown key {_shown(unknown[0], repr)} (known: curves, units)",
                              top_at[unknown[0]])
         if curves is not _LIST or not n_curves:
             raise InputError("'curves' must be a non-empty list of curve objects",
@@ -383,7 +383,7 @@ def _checked(item: _Curve) -> tuple[NurbsCurve, float, Location]:
         raise InputError(f"curves[{i}] must be an object", item.at(""))
     unknown = sorted(set(raw) - CURVE_KEYS)
     if unknown:
-        raise InputError(f"curves[{i}]: unknown key '{unknown[0]}' (known: "
+        raise InputError(f"curves[{i}]: unknown key {_shown(unknown[0], repr)} (known: "
                          f"{', '.join(sorted(CURVE_KEYS))})", item.at(unknown[0]))
     for key in ("degree", "knots", "control_points"):
         if key not in raw:
