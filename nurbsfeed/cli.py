@@ -156,7 +156,7 @@ def expand_inputs(inputs: tuple[str, ...]) -> list[Path]:
     for item in inputs:
         matches = sorted(glob.glob(item)) if glob.has_magic(item) else [item]
         if not matches:
-            raise click.UsageError(f"no file matches '{item}'")
+            raise click.UsageError(f"no file matches {item!r}")
         for match in matches:
             path = Path(match)
             if path.is_dir():

@@ -99,6 +99,13 @@ MAX_PROFILE_BYTES = 1 << 20
 MAX_PROFILE_NODES = 1000
 
 
+def _key_shown(key: Any) -> str:
+    """A key the user wrote, for a message: escaped by repr (its newline or control character
+    never reaches the message raw: a key "odd\\nkey" split one in two lines), cut at 60."""
+    shown = _shown(key)
+    return shown if len(shown) <= 60 else shown[:57] + "..."
+
+
 def _shown(value: Any) -> str:
     """`value` for a message: a huge integer by its size (Python will not even print one of
     more than 4300 digits)."""
@@ -142,9 +149,8 @@ def machine_from_mapping(data: Any, where: str, places: Mapping[str, Location] |
     known = set(FLOAT_KEYS) | set(INT_KEYS) | {"jerk_model"}
     for key in data:
         if key not in known:
-            # repr: a key's newline or control character must not reach the message raw
-            shown = repr(key) if len(repr(key)) <= 60 else repr(key)[:57] + "..."
-            raise ProfileError(f"unknown key {shown} (known keys: {', '.join(sorted(known))})",
+            raise ProfileError(f"unknown key {_key_shown(key)} (known keys: "
+                               f"{', '.join(sorted(known))})",
                                places.get(key, here))
     values: dict[str, float | int] = {}
     for key in FLOAT_KEYS + INT_KEYS:
@@ -289,7 +295,7 @@ class _ProfileLoader(yaml.SafeLoader):
                 continue  # an unhashable key: SafeLoader's own message
             if key in seen:
                 raise yaml.constructor.ConstructorError(
-                    None, None, f"key '{key}' appears twice", key_node.start_mark)
+                    None, None, f"key {_key_shown(key)} appears twice", key_node.start_mark)
             seen.add(key)
         return super().construct_mapping(node, deep=deep)
 
@@ -342,7 +348,7 @@ def load_machine(name_or_path: str, overrides: Mapping[str, Any] | None = None) 
         text = _read_profile(path)
     else:
         if name_or_path not in builtin_profiles():
-            raise ProfileError(f"unknown machine '{name_or_path}': give a YAML file or one of "
+            raise ProfileError(f"unknown machine {name_or_path!r}: give a YAML file or one of "
                                f"{', '.join(builtin_profiles())}")
         where = f"{name_or_path}.yaml"
         text = (resources.files("nurbsfeed.configs") / where).read_text(encoding="utf-8")

@@ -215,3 +215,17 @@ def test_an_unknown_profile_key_is_shown_escaped_on_one_line(tmp_path: Path) -> 
     assert result.exit_code == 2
     message = result.stderr.strip()
     assert "\n" not in message and "unknown key 'odd\\nkey\\x07'" in message
+
+
+def test_a_key_given_twice_is_shown_escaped_on_one_line(tmp_path: Path) -> None:
+    """The same class as the unknown key: a JSON or YAML key given twice was echoed raw."""
+    text = '{"curves": [{"degree": 1, "knots": [0, 0, 1, 1], "control_points": [[0, 0], [1, 0]]}],'
+    message = refused(tmp_path, text + ' "a\\nb": 1, "a\\nb": 2}', "in.json")
+    assert "\n" not in message and "'a\\nb' appears twice" in message
+    profile = tmp_path / "p.yaml"
+    profile.write_text((ROOT / "configs" / "default.yaml").read_text()
+                       + '"a\\nb": 1\n"a\\nb": 2\n')
+    result = CliRunner().invoke(main, ["convert", str(ROOT / "samples" / "circle.json"),
+                                       "-m", str(profile), "-o", str(tmp_path / "out.nc")])
+    assert result.exit_code == 2
+    assert "\n" not in result.stderr.strip() and "key 'a\\nb' appears twice" in result.stderr

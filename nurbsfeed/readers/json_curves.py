@@ -265,7 +265,7 @@ def _events(text: _JsonText) -> Iterator[tuple[str, Any, int] | _Curve]:
                 text.expect('"', "Expecting property name enclosed in double quotes")
             key, at, _ = text.value()
             if key in seen:  # json.loads would keep the last silently
-                raise InputError(f"'{key}' appears twice", text.location(at))
+                raise InputError(f"{_shown(key, repr)} appears twice", text.location(at))
             seen.add(key)
             text.expect(":", "Expecting ':' delimiter")
             if key == "curves" and text.next_char() == "[":
