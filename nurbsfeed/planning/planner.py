@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import cached_property
+from typing import NamedTuple
 
 import numpy as np
 
@@ -418,8 +419,34 @@ def _too_long(cycle_s: float, max_curve_time_s: float) -> str:
             "(raise it in the profile or with --max-curve-time-s)")
 
 
+class _OnGrid(NamedTuple):
+    """What `_plan_on_grid` plans on one grid: the eroded limit (M,), the key points and their
+    segments (as in `Plan`), the law's pieces (timelaw.chain_segments), key times and duration,
+    the law's speed at the nodes, the fix rounds and the segments' hidden peaks."""
+
+    limit: np.ndarray
+    key_node: np.ndarray
+    key_kind: np.ndarray
+    nominal: np.ndarray
+    n_peaks: int
+    v: np.ndarray
+    peak: np.ndarray
+    hold_start: np.ndarray
+    hold_end: np.ndarray
+    pieces: list[np.ndarray]
+    key_t: np.ndarray
+    duration: float
+    v_nodes: np.ndarray
+    rounds: int
+    hidden_peak_s: np.ndarray
+
+    def law(self) -> TimeLaw:
+        t0, s0, v0, a0, jk = self.pieces
+        return TimeLaw.from_pieces(t0, s0, v0, a0, jk, self.key_t, self.duration)
+
+
 def _plan_on_grid(grid: Grid, raw_limit, fcap, feed_nodes, kappa0: float, lim: Limits,
-                  acc: float, jerk: float, fixed_keys: np.ndarray):
+                  acc: float, jerk: float, fixed_keys: np.ndarray) -> _OnGrid:
     """Steps 2-5 on one grid, with shoulder key points added where holds cannot help.
 
     Beside a rest where the limit rises steeply (a curve that starts with a hook, a weight near
@@ -444,8 +471,8 @@ def _plan_on_grid(grid: Grid, raw_limit, fcap, feed_nodes, kappa0: float, lim: L
         if new.size == 0 or shoulders.size >= SHOULDER_ROUNDS * max(1, key_node.size):
             break
         shoulders = np.union1d(shoulders, new)
-    return (limit, key_node, key_kind, nominal, n_peaks, v, peak, hold_start, hold_end, pieces,
-            key_t, duration, v_nodes, rounds, hidden_peak_s)
+    return _OnGrid(limit, key_node, key_kind, nominal, n_peaks, v, peak, hold_start, hold_end,
+                   pieces, key_t, duration, v_nodes, rounds, hidden_peak_s)
 
 
 def _hidden_slowdown(curve: NurbsCurve, grid: Grid, lim: Limits, feed_u, feed_mm_s, peak,
@@ -610,9 +637,11 @@ def path_excess(curve: NurbsCurve, grid: Grid, law: TimeLaw,
     return worst, caps
 
 
-def _law(pieces: list[np.ndarray], key_t: np.ndarray, duration: float) -> TimeLaw:
-    t0, s0, v0, a0, jk = pieces
-    return TimeLaw.from_pieces(t0, s0, v0, a0, jk, key_t, duration)
+def _cycle_left(on: _OnGrid, law: TimeLaw, excess: float, hidden_slowdown: float) -> float:
+    """The law's duration after the uniform slowdown it would still need: the path limits'
+    excess, the nodes the fix rounds left too fast, the hidden peaks."""
+    return law.duration_s * max(excess, _node_excess(on.key_node, on.limit, on.v_nodes),
+                                hidden_slowdown)
 
 
 def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
@@ -633,14 +662,12 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
         grid = build_grid(curve, spacing, extra_u, kappa0)
         fcap = feed_at(grid.u, feed_u, feed_mm_s)
         feed_nodes = np.searchsorted(grid.u, feed_breaks)
-        raw_limit = speed_limit(grid.kappa_1_mm, lim, fcap)
-        fixed_keys = np.empty(0, dtype=np.int64)
+        paper_limit = speed_limit(grid.kappa_1_mm, lim, fcap)
+        raw_limit, fixed_keys = paper_limit, np.empty(0, dtype=np.int64)
         if path:
-            raw_limit, fixed_keys = _path_limit(curve, grid, lim, raw_limit)
-        (limit, key_node, key_kind, nominal, n_peaks, v, peak, hold_start, hold_end, pieces,
-         key_t, duration, v_nodes, rounds, hidden_peak_s) = _plan_on_grid(
-            grid, raw_limit, fcap, feed_nodes, kappa0, lim, acc, jerk, fixed_keys)
-        hidden = np.flatnonzero(np.isfinite(hidden_peak_s[:, 0]))
+            raw_limit, fixed_keys = _path_limit(curve, grid, lim, paper_limit)
+        on = _plan_on_grid(grid, raw_limit, fcap, feed_nodes, kappa0, lim, acc, jerk, fixed_keys)
+        hidden = np.flatnonzero(np.isfinite(on.hidden_peak_s[:, 0]))
         if hidden.size == 0 or refine == PEAK_NODE_ROUNDS:
             break
         # a segment whose peak hid between two nodes (grid spacing follows the feed, not the
@@ -649,59 +676,53 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
         # longer than GRID_STEPS steps at that peak (the eroded limit covers shorter ones)
         mids = []
         for seg in hidden:
-            first, last = key_node[seg], key_node[seg + 1]
-            wide = np.diff(grid.s_mm[first:last + 1]) > GRID_STEPS * peak[seg] * lim.period_s
+            first, last = on.key_node[seg], on.key_node[seg + 1]
+            wide = np.diff(grid.s_mm[first:last + 1]) > GRID_STEPS * on.peak[seg] * lim.period_s
             mids.append(0.5 * (grid.u[first:last] + grid.u[first + 1:last + 1])[wide])
         more = np.concatenate(mids)
         if more.size == 0:
             break
         extra_u = np.union1d(extra_u, more)
-    law = _law(pieces, key_t, duration)
+    law = on.law()
     excess = 1.0
+    hidden_slowdown = _hidden_slowdown(curve, grid, lim, feed_u, feed_mm_s, on.peak,
+                                       on.hidden_peak_s)
     if path:
         # where the S-curves' own acceleration and jerk break a path limit, lower the limit
         # there and plan again (PATH_FIX_ROUNDS at most, keeping the plan whose cycle after the
         # uniform slowdown that is left is the shortest): one needle of a 0.14 um hook beside
         # an end once slowed a whole 58 mm curve 6.3 times
         excess, caps = path_excess(curve, grid, law, lim)
-        left = max(excess, _node_excess(key_node, limit, v_nodes),
-                   _hidden_slowdown(curve, grid, lim, feed_u, feed_mm_s, peak, hidden_peak_s))
-        best = (law.duration_s * left, excess, law, limit, key_node, key_kind, nominal,
-                n_peaks, v, peak, hold_start, hold_end, v_nodes, rounds, hidden_peak_s)
+        best = (_cycle_left(on, law, excess, hidden_slowdown), on, law, excess, hidden_slowdown)
         path_caps = caps
         for _ in range(PATH_FIX_ROUNDS):
             if excess <= 1.0 + PATH_FIX_REL:
                 break
-            raw_limit, fixed_keys = _path_limit(curve, grid, lim,
-                                                speed_limit(grid.kappa_1_mm, lim, fcap),
-                                                path_caps)
-            (limit, key_node, key_kind, nominal, n_peaks, v, peak, hold_start, hold_end, pieces,
-             key_t, duration, v_nodes, rounds, hidden_peak_s) = _plan_on_grid(
-                grid, raw_limit, fcap, feed_nodes, kappa0, lim, acc, jerk, fixed_keys)
-            law = _law(pieces, key_t, duration)
+            raw_limit, fixed_keys = _path_limit(curve, grid, lim, paper_limit, path_caps)
+            on = _plan_on_grid(grid, raw_limit, fcap, feed_nodes, kappa0, lim, acc, jerk,
+                               fixed_keys)
+            law = on.law()
             excess, caps = path_excess(curve, grid, law, lim)
-            left = max(excess, _node_excess(key_node, limit, v_nodes),
-                       _hidden_slowdown(curve, grid, lim, feed_u, feed_mm_s, peak, hidden_peak_s))
-            if law.duration_s * left < best[0]:
-                best = (law.duration_s * left, excess, law, limit, key_node, key_kind, nominal,
-                        n_peaks, v, peak, hold_start, hold_end, v_nodes, rounds, hidden_peak_s)
+            hidden_slowdown = _hidden_slowdown(curve, grid, lim, feed_u, feed_mm_s, on.peak,
+                                               on.hidden_peak_s)
+            cycle = _cycle_left(on, law, excess, hidden_slowdown)
+            if cycle < best[0]:
+                best = (cycle, on, law, excess, hidden_slowdown)
             path_caps = np.minimum(path_caps, caps)
-        (_, excess, law, limit, key_node, key_kind, nominal, n_peaks, v, peak, hold_start,
-         hold_end, v_nodes, rounds, hidden_peak_s) = best
+        _, on, law, excess, hidden_slowdown = best
     if not law.duration_s <= max_curve_time_s:
         raise CurveError(_too_long(law.duration_s, max_curve_time_s))
-    slowdown = max(excess, _hidden_slowdown(curve, grid, lim, feed_u, feed_mm_s, peak,
-                                            hidden_peak_s))
+    slowdown = max(excess, hidden_slowdown)
     slowdown, piece_key, piece_periods, piece_scale = _whole_periods(
-        v, law.key_t_s, key_node, limit, v_nodes, lim.period_s, slowdown)
+        on.v, law.key_t_s, on.key_node, on.limit, on.v_nodes, lim.period_s, slowdown)
     if np.any(piece_periods < 0):
         raise CurveError(_too_long(law.duration_s * slowdown, max_curve_time_s))
     cycle_s = float(piece_periods.sum()) * lim.period_s
     if not cycle_s <= max_curve_time_s:
         raise CurveError(_too_long(cycle_s, max_curve_time_s))
-    for arr in (key_node, key_kind, nominal, v, peak, hold_start, hold_end, piece_key,
-                piece_periods, piece_scale):
+    for arr in (on.key_node, on.key_kind, on.nominal, on.v, on.peak, on.hold_start, on.hold_end,
+                piece_key, piece_periods, piece_scale):
         arr.setflags(write=False)
-    return Plan(curve, lim, grid, kappa0, int(n_peaks), key_node, key_kind, nominal, v, peak,
-                hold_start, hold_end, law, slowdown, piece_key, piece_periods, piece_scale,
-                rounds, acc, jerk)
+    return Plan(curve, lim, grid, kappa0, int(on.n_peaks), on.key_node, on.key_kind, on.nominal,
+                on.v, on.peak, on.hold_start, on.hold_end, law, slowdown, piece_key,
+                piece_periods, piece_scale, on.rounds, acc, jerk)
