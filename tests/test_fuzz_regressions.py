@@ -205,15 +205,21 @@ def test_an_unknown_json_key_is_shown_escaped_on_one_line(tmp_path: Path, key: s
         assert f"unknown key {key!r}" in message
 
 
-def test_an_unknown_profile_key_is_shown_escaped_on_one_line(tmp_path: Path) -> None:
-    """The same in a machine profile: a YAML key "odd\\nkey" printed raw split the message."""
+def refused_profile(tmp_path: Path, extra_yaml: str) -> str:
+    """Convert a sample under the default profile with `extra_yaml` appended; the profile must
+    be refused with exit 2: the message."""
     profile = tmp_path / "p.yaml"
-    profile.write_text((ROOT / "configs" / "default.yaml").read_text()
-                       + '"odd\\nkey\\x07": 1\n')
+    profile.write_text((ROOT / "configs" / "default.yaml").read_text() + extra_yaml)
     result = CliRunner().invoke(main, ["convert", str(ROOT / "samples" / "circle.json"),
                                        "-m", str(profile), "-o", str(tmp_path / "out.nc")])
     assert result.exit_code == 2
-    message = result.stderr.strip()
+    assert not (tmp_path / "out.nc").exists()
+    return result.stderr.strip()
+
+
+def test_an_unknown_profile_key_is_shown_escaped_on_one_line(tmp_path: Path) -> None:
+    """The same in a machine profile: a YAML key "odd\\nkey" printed raw split the message."""
+    message = refused_profile(tmp_path, '"odd\\nkey\\x07": 1\n')
     assert "\n" not in message and "unknown key 'odd\\nkey\\x07'" in message
 
 
@@ -222,10 +228,5 @@ def test_a_key_given_twice_is_shown_escaped_on_one_line(tmp_path: Path) -> None:
     text = '{"curves": [{"degree": 1, "knots": [0, 0, 1, 1], "control_points": [[0, 0], [1, 0]]}],'
     message = refused(tmp_path, text + ' "a\\nb": 1, "a\\nb": 2}', "in.json")
     assert "\n" not in message and "'a\\nb' appears twice" in message
-    profile = tmp_path / "p.yaml"
-    profile.write_text((ROOT / "configs" / "default.yaml").read_text()
-                       + '"a\\nb": 1\n"a\\nb": 2\n')
-    result = CliRunner().invoke(main, ["convert", str(ROOT / "samples" / "circle.json"),
-                                       "-m", str(profile), "-o", str(tmp_path / "out.nc")])
-    assert result.exit_code == 2
-    assert "\n" not in result.stderr.strip() and "key 'a\\nb' appears twice" in result.stderr
+    message = refused_profile(tmp_path, '"a\\nb": 1\n"a\\nb": 2\n')
+    assert "\n" not in message and "key 'a\\nb' appears twice" in message
