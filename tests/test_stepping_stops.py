@@ -93,8 +93,23 @@ def test_no_point_before_the_last_reaches_the_end_and_u_never_steps_back(name: s
         assert np.array_equal(run.points[-1], curve.points[-1])
 
 
+def test_a_dip_of_the_speed_inside_one_step_keeps_the_chord_on_its_target() -> None:
+    """A degree-4 G6.2 curve with repeated control points and knots (fuzz seed 39): on a
+    straight leg |C'| dips to 4 % of its mean inside one step (u 0.1271 to 0.1386) but reads
+    0.46 and 0.56 at the two points rk2c samples, so the step is not taken as slow. Its one
+    chord correction left the chord at 0.005032 mm for a 0.004991 mm target (0.8 % over: the
+    motion guard refused the valid program at 5.032 mm/s against F300). Every chord is its
+    target now; the only excess left is the landing's on a rest, below a nanometre."""
+    runs = stepped("dip-inside-a-step.ngc")
+    assert [curve.degree for curve, _ in runs] == [1, 4, 4]
+    for curve, run in runs:
+        chord = np.linalg.norm(np.diff(run.points, axis=0), axis=1)
+        assert np.all(chord <= run.ds_mm * (1.0 + 1e-5) + 1e-9)
+        assert np.allclose(run.points, curve.point(run.u), rtol=0, atol=1e-9)
+
+
 @pytest.mark.parametrize("name", ["turn-back.ngc", "stop-jerk.nc", "end-overshoot.ngc",
-                                  "end-overshoot-g18.ngc"])
+                                  "end-overshoot-g18.ngc", "dip-inside-a-step.ngc"])
 def test_the_findings_conversions_pass_check(tmp_path: Path, name: str) -> None:
     target = tmp_path / f"out{Path(name).suffix}"
     converted = CliRunner().invoke(main, ["convert", str(DATA / name), "-o", str(target)])
