@@ -73,8 +73,7 @@ NORMAL_DIRECTIONS = 16  # polygon standing in for the circle |jerk across T| <= 
 PLANAR_REL = 1e-9  # off-plane parts below this (relative) make a curve planar
 GAUSS_POINTS = 16
 MAX_ITERATIONS = 40  # of the first phase
-CONVERGED_REL = 2e-5  # scaled cycle time changing less than this between iterations ...
-LAMBDA_CONVERGED = 1e-4  # ... with a scaling this close to 1: converged
+CONVERGED_REL = 2e-5  # a convex-concave step gaining less than this (relative): converged
 LP_METHOD = "highs"
 TRUST_START, TRUST_SWITCH, TRUST_MAX = 0.5, 0.2, 4.0
 MAX_TANGENT_ITERATIONS = 4  # how far b may grow, relative to itself
