@@ -465,10 +465,13 @@ def _print_summary(results: list[dict[str, Any]]) -> None:
 
 @main.command()
 @click.argument("input", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--reference", is_flag=True,
+              help="Also find a jerk-limited schedule under the same limits, by its own code "
+                   "(sequential linear programming), and compare (seconds to minutes a curve).")
 @machine_options
 @dialect_option
 @reports_errors
-def plan(input: Path, dialect: str, **kwargs: Any) -> None:
+def plan(input: Path, dialect: str, reference: bool, **kwargs: Any) -> None:
     """Key points, nominal and scanned speeds, segments and cycle time of every curve."""
     from nurbsfeed.analysis import time_optimal_bound_s
     from nurbsfeed.pipeline import plan_block
@@ -518,10 +521,24 @@ def plan(input: Path, dialect: str, **kwargs: Any) -> None:
         click.echo(f"  time-optimal bound {bound:.3f} s (acceleration-limited, no jerk limit): "
                    f"planned is {100 * (p.cycle_time_s / bound - 1):+.1f}%" if bound > 0 else
                    "  time-optimal bound 0 s (zero length)")
+        if reference and bound > 0:
+            click.echo(_reference_line(item, machine, p.cycle_time_s, bound))
         index += 1
     if index == 0:
         click.echo("no NURBS curves in the input")
 
+
+def _reference_line(block: Any, machine: Any, cycle_s: float, bound_s: float) -> str:
+    """`plan --reference`: the jerk-limited reference schedule's cycle and the plan's ratio."""
+    from nurbsfeed.analysis.bound import jerk_limited_schedule
+
+    try:
+        ref = jerk_limited_schedule(block.curve, machine.limits, block.feed_u, block.feed_mm_s)
+    except (RuntimeError, ValueError) as exc:  # an LP HiGHS could not solve, NaN geometry
+        return f"  jerk-limited reference: not found ({exc})"
+    return (f"  jerk-limited reference {ref.cycle_s:.3f} s (keeps every limit; the optimum lies "
+            f"between {bound_s:.3f} and {ref.cycle_s:.3f} s): planned is "
+            f"{100 * (cycle_s / ref.cycle_s - 1):+.1f}%")
 
 
 # ---- compare, check, plot --------------------------------------------------------------------

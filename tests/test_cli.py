@@ -6,6 +6,7 @@ import csv
 import difflib
 import io
 import json
+import math
 import os
 import re
 import subprocess
@@ -22,6 +23,7 @@ from nurbsfeed.machine import load_machine
 from nurbsfeed.readers.json_curves import read_json_curves
 from tests.conftest import ROOT, SAMPLES
 from tests.gcode_parse import moves
+from tests.test_bound import scurve_rest_to_rest_s
 
 GOLDEN = ROOT / "tests" / "golden"
 # the default profile's coordinate decimals (chosen from its limits: tests/test_profile.py)
@@ -106,6 +108,20 @@ def test_plan_reports_key_points_segments_and_the_bound() -> None:
     assert "time-optimal bound 5.48" in stdout
     cycle = float(stdout.split("cycle time ")[1].split(" s")[0])
     assert 5.48 < cycle < 7.0
+
+
+def test_plan_reference_is_the_jerk_limited_optimum_on_a_quarter_circle() -> None:
+    """The quarter circle (r 10 mm, 15.708 mm at F50, default profile) is slow enough for the
+    curvature never to bind (v^2 kappa = 250 of 2000 mm/s^2, v^3 kappa^2 = 1,250 of 50,000
+    mm/s^3): its jerk-limited optimum is a straight line's, in closed form."""
+    code, stdout, _ = run("plan", str(SAMPLES / "quarter-circle.json"), "--reference")
+    assert code == 0
+    line = next(x for x in stdout.splitlines() if "jerk-limited reference" in x)
+    ref = float(line.split("reference ")[1].split(" s")[0])
+    cycle = float(stdout.split("cycle time ")[1].split(" s")[0])
+    exact = scurve_rest_to_rest_s(0.5 * math.pi * 10.0, 50.0, 2000.0, 50000.0)
+    assert exact * (1 - 1e-3) <= ref <= exact * 1.01
+    assert f"planned is {100 * (cycle / ref - 1):+.1f}%" in line
 
 
 def test_batch_keeps_names_reports_each_file_and_fails_on_one_bad_file(tmp_path: Path) -> None:
