@@ -634,6 +634,20 @@ def jerk_limited_schedule(curve: NurbsCurve, limits: Limits,
             else:
                 jerk_coefs.append((sign * coef, fam.limit))
 
+    def solve(slowness: np.ndarray, a_ub: sp.csr_matrix, b_ub: np.ndarray, high: np.ndarray
+              ) -> tuple[np.ndarray, float, float]:
+        """One LP: maximise the slowness-weighted b under the rows, b <= high; the solution,
+        the time scaling lambda that makes it feasible and its scaled cycle."""
+        objective = -np.concatenate([slowness / slowness.sum(), np.zeros(m)])
+        bounds = np.concatenate([np.stack([np.zeros(m), high], axis=1),
+                                 np.stack([-d_cap, d_cap], axis=1)])
+        res = linprog(objective, A_ub=a_ub, b_ub=b_ub, A_eq=a_eq, b_eq=b_eq, bounds=bounds,
+                      method=LP_METHOD)
+        if res.status != 0:
+            raise RuntimeError(f"the reference schedule's linear program failed: {res.message}")
+        lam = max(1.0, max(worst_ratios(pts, cons, fams, normal, res.x).values()))
+        return res.x, lam, lam * _cycle(res.x, h, m, rest_left, rest_right)
+
     floor_b = FLOOR_SHARE * limits.feed_mm_s**2
     x_best = np.concatenate([START_SHARE * _acc_limited(node_cap.copy(), h, limits.acc_mm_s2),
                              np.zeros(m)])
@@ -650,19 +664,10 @@ def jerk_limited_schedule(curve: NurbsCurve, limits: Limits,
         # the cycle time sum w / sqrt(b), linearised: a node where b is small weighs in as
         # much as the time it costs
         slowness = weight / b_lin**1.5
-        objective = -np.concatenate([slowness / slowness.sum(), np.zeros(m)])
         # only growth is bounded: where b falls below the linearisation point, sqrt(b_lin) |L|
         # bounds the true sqrt(b) |L|, and the jerk rows are conservative
         high = np.minimum(node_cap**2, b_lin + trust * np.maximum(b_lin, 1e-3 * node_cap**2))
-        bounds = np.concatenate([np.stack([np.zeros(m), high], axis=1),
-                                 np.stack([-d_cap, d_cap], axis=1)])
-        res = linprog(objective, A_ub=a_ub, b_ub=b_ub, A_eq=a_eq, b_eq=b_eq, bounds=bounds,
-                      method=LP_METHOD)
-        if res.status != 0:
-            raise RuntimeError(f"the reference schedule's linear program failed: {res.message}")
-        x = res.x
-        lam = max(1.0, max(worst_ratios(pts, cons, fams, normal, x).values()))
-        scaled = lam * _cycle(x, h, m, rest_left, rest_right)
+        x, lam, scaled = solve(slowness, a_ub, b_ub, high)
         if scaled < best_scaled:
             x_best, best_scaled, best_lambda = x, scaled, lam
             x_lin = x
@@ -690,17 +695,7 @@ def jerk_limited_schedule(curve: NurbsCurve, limits: Limits,
                                                np.ones(n_pts)) for coef, lim in jerk_coefs])
         b_ub = np.concatenate(fixed_rhs + [1.5 * lim / np.sqrt(lin_points)
                                            for _, lim in jerk_coefs])
-        slowness = weight / lin_nodes**1.5
-        objective = -np.concatenate([slowness / slowness.sum(), np.zeros(m)])
-        bounds = np.concatenate([np.stack([np.zeros(m), node_cap**2], axis=1),
-                                 np.stack([-d_cap, d_cap], axis=1)])
-        res = linprog(objective, A_ub=a_ub.tocsr(), b_ub=b_ub, A_eq=a_eq, b_eq=b_eq,
-                      bounds=bounds, method=LP_METHOD)
-        if res.status != 0:
-            raise RuntimeError(f"the reference schedule's linear program failed: {res.message}")
-        x = res.x
-        lam = max(1.0, max(worst_ratios(pts, cons, fams, normal, x).values()))
-        scaled = lam * _cycle(x, h, m, rest_left, rest_right)
+        x, lam, scaled = solve(weight / lin_nodes**1.5, a_ub.tocsr(), b_ub, node_cap**2)
         if scaled < best_scaled:
             gain = best_scaled - scaled
             x_best, best_scaled, best_lambda = x, scaled, lam
