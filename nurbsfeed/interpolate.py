@@ -94,13 +94,14 @@ CHORD_ITERATIONS = 200
 # rk2c: a step across a knot whose chord is still this far (relative) from its target after two
 # corrections is solved exactly (a knot where |C'| jumps: a rational curve of degree 1)
 KNOT_CHORD_REL = 1e-9
-# rk2c: a step whose chord at u~ (before its correction) is off its target by more than about
-# half this (|chord^2 - h^2| / h^2 above it) is corrected twice and checked as across a knot.
-# On the samples u~'s chord is off by 0.21 % at most (the butterfly's tightest turns; one
+# rk2c: a step whose chord correction moves u by more than this share of the step (u~'s chord
+# was off its target by about as much) is checked, and solved exactly if still off, as across a
+# knot. On the samples u~'s chord is off by 0.21 % at most (the butterfly's tightest turns; the
 # correction takes that to 5e-8); a dip of |C'| to 4 % of its mean inside one step of a straight
-# leg, between the points rk2c samples, left it 14 % off, and one correction 0.8 % (a feed
-# 0.6 % over the cap).
-STEP_CHORD_OFF_MAX = 1e-2
+# leg, between the points rk2c samples, left it 14 % off, and the correction 0.8 % (a feed 0.6 %
+# over the cap). Checked after the one correction, not by a second one inside its loop: that
+# cost 10 % of the kernel's time on the butterfly.
+STEP_CORRECTION_MAX = 5e-3
 EPS = float(np.finfo(float).eps)
 
 
@@ -373,11 +374,12 @@ def step_spans(method, knots, coef, degree, n_spans, u0, ds, sigma, slow_speed, 
                     # jumps and one correction from u~ can leave the chord off by 0.4 % (a 10 %
                     # acceleration spike, from positions): correct again from the corrected u
                     # there (Newton on the chord), only at those steps, and if the chord is
-                    # still off, solve it exactly. Likewise where u~'s chord is far off
-                    # (STEP_CHORD_OFF_MAX: |C'| dips within the step, unseen at the points
+                    # still off, solve it exactly. Likewise where the correction was large
+                    # (STEP_CORRECTION_MAX: |C'| dips within the step, unseen at the points
                     # sampled).
                     crossed = s2 != span or s3 != span
-                    for c in range(2):
+                    du = 0.0
+                    for _ in range(2 if crossed else 1):
                         qx, qy, qz, tx, ty, tz = point_d1(knots, coef, degree, s3, ut)
                         ex = qx - px
                         ey = qy - py
@@ -385,10 +387,6 @@ def step_spans(method, knots, coef, degree, n_spans, u0, ds, sigma, slow_speed, 
                         c1 = tx * tx + ty * ty + tz * tz
                         c2 = 2.0 * (tx * ex + ty * ey + tz * ez)
                         c3 = ex * ex + ey * ey + ez * ez - h * h
-                        if c == 0 and abs(c3) > STEP_CHORD_OFF_MAX * h * h:
-                            crossed = True
-                        elif c == 1 and not crossed:
-                            break
                         disc = c2 * c2 - 4.0 * c1 * c3
                         du = 0.0
                         if disc >= 0.0:
@@ -397,7 +395,7 @@ def step_spans(method, knots, coef, degree, n_spans, u0, ds, sigma, slow_speed, 
                                 du = -2.0 * c3 / den
                         ut = ut + du
                         s3 = find_span(knots, degree, n_ctrl, ut, s3)
-                    if crossed or s3 != span:
+                    if crossed or s3 != span or abs(du) > STEP_CORRECTION_MAX * (ut - u):
                         qx, qy, qz, _, _, _ = point_d1(knots, coef, degree, s3, ut)
                         chord = math.sqrt((qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2)
                         if abs(chord - h) > KNOT_CHORD_REL * h:
