@@ -11,6 +11,7 @@ from __future__ import annotations
 import functools
 import gc
 import glob
+import importlib
 import os
 import signal
 import stat
@@ -480,6 +481,12 @@ def plan(input: Path, dialect: str, reference: bool, **kwargs: Any) -> None:
     from nurbsfeed.program import CurveBlock
     from nurbsfeed.readers import read_program
 
+    if reference:
+        try:
+            importlib.import_module("nurbsfeed.analysis.bound")  # scipy, an extra
+        except ImportError:
+            click.echo(REFERENCE_NEEDS_SCIPY, err=True)
+            sys.exit(EXIT_BAD_INPUT)
     machine = machine_from(kwargs)
     index = 0
     for item in read_program(input, dialect):
@@ -544,6 +551,8 @@ def _reference_line(block: Any, machine: Any, cycle_s: float, bound_s: float) ->
 # ---- compare, check, plot --------------------------------------------------------------------
 
 PLOT_NEEDS_MATPLOTLIB = "nurbsfeed plot needs matplotlib: pip install 'nurbsfeed[plot]'"
+REFERENCE_NEEDS_SCIPY = ("nurbsfeed plan --reference needs scipy: "
+                         "pip install 'nurbsfeed[reference]'")
 
 
 @main.command()

@@ -141,6 +141,17 @@ def test_plot_of_a_curve_that_is_not_there_exits_2(tmp_path: Path) -> None:
     assert not (tmp_path / "x.png").exists()
 
 
+def test_plan_reference_without_scipy_says_how_to_get_it(monkeypatch: pytest.MonkeyPatch) -> None:
+    for name in [m for m in sys.modules if m.split(".")[0] == "scipy"] + ["scipy"]:
+        monkeypatch.setitem(sys.modules, name, None)  # as if not installed: imports fail
+    monkeypatch.delitem(sys.modules, "nurbsfeed.analysis.bound", raising=False)
+    monkeypatch.delattr("nurbsfeed.analysis.bound", raising=False)
+    code, stdout, stderr = run("plan", BUTTERFLY, "--reference")
+    assert code == 2 and stdout == ""
+    assert stderr == ("nurbsfeed plan --reference needs scipy: "
+                      "pip install 'nurbsfeed[reference]'\n")
+
+
 def test_plot_without_matplotlib_says_how_to_get_it(tmp_path: Path,
                                                     monkeypatch: pytest.MonkeyPatch) -> None:
     for name in [m for m in sys.modules if m.split(".")[0] == "matplotlib"] + ["matplotlib"]:
