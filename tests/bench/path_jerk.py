@@ -12,7 +12,8 @@ path quantity against the profile's limit for it: tangential acceleration and je
 and J_t, normal acceleration against A_n, the part of the jerk vector across the path against
 J_n (the planner limits the proxy v^3 kappa^2 instead), and the jerk vector's norm against
 sqrt(J_t^2 + J_n^2), what the two limits allow together. The second gives each axis's largest
-|velocity|, |acceleration| and |jerk|: there are no per-axis limits yet. A file of several
+|velocity|, |acceleration| and |jerk|: these profiles set no per-axis limits (the path
+model's are tested in tests/test_path_model.py). A file of several
 curves shows the largest value over its curves and the sum of their cycle times. Measured
 here, never asserted.
 """
@@ -133,8 +134,8 @@ def main() -> None:
     print("|---|---|---:|---:|---:|---:|---:|---:|")
     for name, profile, found in rows:
         print(f"| {path_row(name, profile, found, machines[profile])} |")
-    print("\nAxes: largest |velocity| mm/s, |acceleration| mm/s², |jerk| mm/s³ (no per-axis "
-          "limits yet).\n")
+    print("\nAxes: largest |velocity| mm/s, |acceleration| mm/s², |jerk| mm/s³ (the "
+          "profiles set no per-axis limits).\n")
     print("| curve | profile | vX | vY | vZ | aX | aY | aZ | jX | jY | jZ |")
     print("|---|---|" + "---:|" * 9)
     for name, profile, found in rows:
