@@ -38,6 +38,7 @@ from nurbsfeed.machine import FLOAT_KEYS, INT_KEYS, JERK_MODELS, load_machine
 
 if TYPE_CHECKING:
     from nurbsfeed.machine import Machine
+    from nurbsfeed.program import CurveBlock
 
 TAYLOR1_WARNING = ("nurbsfeed: warning: taylor1 is the paper's first-order baseline; its points "
                    "drift off the planned feed by up to a few percent, which can break the "
@@ -535,7 +536,8 @@ def plan(input: Path, dialect: str, reference: bool, **kwargs: Any) -> None:
         click.echo("no NURBS curves in the input")
 
 
-def _reference_line(block: Any, machine: Any, cycle_s: float, bound_s: float) -> str:
+def _reference_line(block: CurveBlock, machine: Machine, cycle_s: float, bound_s: float
+                    ) -> str:
     """`plan --reference`: the jerk-limited reference schedule's cycle and the plan's ratio."""
     from nurbsfeed.analysis.bound import jerk_limited_schedule
 
