@@ -200,8 +200,7 @@ class Grid:
     mid: Geometry
 
 
-def build_grid(curve: NurbsCurve, cons: Limits, feed_u: np.ndarray) -> Grid:
-    lim = cons
+def build_grid(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray) -> Grid:
     breaks = np.unique(np.concatenate([curve.span_breaks, feed_u[(feed_u > curve.u_min)
                                                                    & (feed_u < curve.u_max)]]))
     rests = rest_parameters(curve)
@@ -286,19 +285,18 @@ def _concat(parts: list[Geometry]) -> Geometry:
                        "curvature_vector_s")))
 
 
-def speed_cap(cons: Limits, geo: Geometry, feed_mm_s: np.ndarray) -> np.ndarray:
+def speed_cap(lim: Limits, geo: Geometry, feed_mm_s: np.ndarray) -> np.ndarray:
     """The pointwise speed limit (P,) of the model at each point."""
-    lim = cons
     k = geo.kappa
     t, delta = lim.period_s, lim.chord_mm
     with np.errstate(divide="ignore", invalid="ignore"):
         chord = np.where(k * delta < 1.0, (2.0 / t) * np.sqrt(delta * (2.0 - k * delta) / k),
                          2.0 / (k * t))
         cap = np.minimum(chord, np.sqrt(lim.normal_acc_mm_s2 / k))
-        if cons.jerk_model == "paper":
+        if lim.jerk_model == "paper":
             cap = np.minimum(cap, np.cbrt(lim.normal_jerk_mm_s3 / (k * k)))
         cap = np.where(k > 0.0, cap, np.inf)
-        axis = np.min(np.asarray(cons.axis_vel_mm_s)[None, :] / np.abs(geo.tangent), axis=1)
+        axis = np.min(np.asarray(lim.axis_vel_mm_s)[None, :] / np.abs(geo.tangent), axis=1)
     cap = np.minimum(cap, axis)
     cap = np.where(np.isfinite(k), cap, 0.0)
     return np.minimum(np.minimum(cap, lim.feed_mm_s), feed_mm_s)
@@ -312,7 +310,7 @@ def _feed_at(u: np.ndarray, feed_u: np.ndarray, feed_mm_s: np.ndarray) -> np.nda
     return table[np.searchsorted(feed_u, u, side="right")]
 
 
-def constraint_points(grid: Grid, cons: Limits, feed_u: np.ndarray,
+def constraint_points(grid: Grid, lim: Limits, feed_u: np.ndarray,
                       feed_mm_s: np.ndarray) -> Points:
     m = grid.u.size
     cells = np.arange(m - 1)
@@ -349,7 +347,7 @@ def constraint_points(grid: Grid, cons: Limits, feed_u: np.ndarray,
         b[rest_side] = np.stack([yr ** (4 / 3), zero, zero], axis=1)
         d[rest_side] = np.stack([sign * 4 / 3 * yr ** (1 / 3) / hr, zero, zero], axis=1)
         dd[rest_side] = np.stack([4 / 9 * yr ** (-2 / 3) / hr**2, zero, zero], axis=1)
-    return Points(cell, sigma, geo, speed_cap(cons, geo, feed), cols, b, d, dd)
+    return Points(cell, sigma, geo, speed_cap(lim, geo, feed), cols, b, d, dd)
 
 
 # ---- constraint families ------------------------------------------------------------------------
@@ -388,14 +386,13 @@ def _normal_basis(geo: Geometry) -> tuple[np.ndarray, np.ndarray, bool]:
     return e1, np.cross(t, e1), planar
 
 
-def families(cons: Limits, geo: Geometry) -> tuple[list[Family], Family | None]:
+def families(lim: Limits, geo: Geometry) -> tuple[list[Family], Family | None]:
     """The linear and linearised rows of the model; and for the path model, the normal jerk
     family whose exact value is a norm (checked exactly, imposed as a polygon)."""
-    lim = cons
     zero = np.zeros(geo.u.size)
     one = np.ones(geo.u.size)
     out: list[Family] = []
-    if cons.jerk_model == "paper":
+    if lim.jerk_model == "paper":
         out += [Family("tangential jerk", zero, zero, 0.5 * one, lim.jerk_mm_s3, 3)]
         return out, None
     ks_t = np.einsum("ij,ij->i", geo.curvature_vector_s, geo.tangent)  # -kappa^2
@@ -403,12 +400,12 @@ def families(cons: Limits, geo: Geometry) -> tuple[list[Family], Family | None]:
     for axis in range(3):
         tx, kx = geo.tangent[:, axis], geo.curvature_vector[:, axis]
         ksx = geo.curvature_vector_s[:, axis]
-        if math.isfinite(cons.axis_acc_mm_s2[axis]):
+        if math.isfinite(lim.axis_acc_mm_s2[axis]):
             out.append(Family(f"acceleration {'XYZ'[axis]}", kx, 0.5 * tx, zero,
-                              cons.axis_acc_mm_s2[axis], 2))
-        if math.isfinite(cons.axis_jerk_mm_s3[axis]):
+                              lim.axis_acc_mm_s2[axis], 2))
+        if math.isfinite(lim.axis_jerk_mm_s3[axis]):
             out.append(Family(f"jerk {'XYZ'[axis]}", ksx, 1.5 * kx, 0.5 * tx,
-                              cons.axis_jerk_mm_s3[axis], 3))
+                              lim.axis_jerk_mm_s3[axis], 3))
     e1, e2, planar = _normal_basis(geo)
     dirs = [0.0, math.pi] if planar else list(
         np.linspace(0, 2 * math.pi, NORMAL_DIRECTIONS, endpoint=False))
@@ -431,7 +428,7 @@ def _normal_jerk(pts: Points, x: np.ndarray) -> np.ndarray:
     return np.linalg.norm(vec, axis=1)
 
 
-def worst_ratios(pts: Points, cons: Limits, fams: list[Family], normal: Family | None,
+def worst_ratios(pts: Points, lim: Limits, fams: list[Family], normal: Family | None,
                  x: np.ndarray) -> dict[str, float]:
     """Each family's largest value / limit raised to 1 / power (the lambda it needs), exact
     sqrt(b): {name: lambda}."""
@@ -441,7 +438,7 @@ def worst_ratios(pts: Points, cons: Limits, fams: list[Family], normal: Family |
         speed = np.where(b > 0, root / pts.speed_cap_mm_s, 0.0)
     out = {"speed": float(speed.max()),
            "tangential acceleration": math.sqrt(
-               float(np.abs(pts.value(pts.d, x)).max()) / (2 * cons.acc_mm_s2))}
+               float(np.abs(pts.value(pts.d, x)).max()) / (2 * lim.acc_mm_s2))}
     for fam in fams:
         if fam.name == "normal jerk polygon":
             continue
@@ -567,12 +564,11 @@ def jerk_limited_schedule(curve: NurbsCurve, limits: Limits,
     feed_u / feed_mm_s: a programmed feed, a step function of the curve's u (as
     `CurveBlock.feed_u`), capping v beside limits.feed_mm_s.
     """
-    cons = limits
     feed_u = np.empty(0) if feed_u is None else np.asarray(feed_u, dtype=float)
     feed_mm_s = np.empty(0) if feed_mm_s is None else np.asarray(feed_mm_s, dtype=float)
-    grid = build_grid(curve, cons, feed_u)
-    pts = constraint_points(grid, cons, feed_u, feed_mm_s)
-    fams, normal = families(cons, pts.geo)
+    grid = build_grid(curve, limits, feed_u)
+    pts = constraint_points(grid, limits, feed_u, feed_mm_s)
+    fams, normal = families(limits, pts.geo)
     m = grid.u.size
     h = np.diff(grid.s_mm)
     rest_left, rest_right = grid.rest[:-1], grid.rest[1:]
@@ -645,7 +641,7 @@ def jerk_limited_schedule(curve: NurbsCurve, limits: Limits,
                       method=LP_METHOD)
         if res.status != 0:
             raise RuntimeError(f"the reference schedule's linear program failed: {res.message}")
-        lam = max(1.0, max(worst_ratios(pts, cons, fams, normal, res.x).values()))
+        lam = max(1.0, max(worst_ratios(pts, limits, fams, normal, res.x).values()))
         return res.x, lam, lam * _cycle(res.x, h, m, rest_left, rest_right)
 
     floor_b = FLOOR_SHARE * limits.feed_mm_s**2
@@ -715,9 +711,9 @@ def jerk_limited_schedule(curve: NurbsCurve, limits: Limits,
     jerk_mid = np.zeros(m - 1)
     jerk_mid[pts.cell[mid]] = (np.sqrt(np.maximum(pts.value(pts.b, x), 0)) * 0.5
                                * pts.value(pts.dd, x))[mid]
-    return BoundSchedule(curve, cons, float(t_nodes[-1]), grid.u, grid.s_mm, np.sqrt(b), d / 2,
+    return BoundSchedule(curve, limits, float(t_nodes[-1]), grid.u, grid.s_mm, np.sqrt(b), d / 2,
                          jerk_mid, t_nodes, grid.rest, best_lambda, iterations,
-                         worst_ratios(pts, cons, fams, normal, x))
+                         worst_ratios(pts, limits, fams, normal, x))
 
 
 def _cycle(x: np.ndarray, h: np.ndarray, m: int, rest_left: np.ndarray, rest_right: np.ndarray
