@@ -14,14 +14,14 @@ from hypothesis import strategies as st
 
 from nurbsfeed.analysis.check import check_files, render_check
 from nurbsfeed.analysis.common import curve_blocks
-from nurbsfeed.errors import ProfileError
+from nurbsfeed.errors import CurveError, ProfileError
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.geometry.nurbs import curvature_from_derivatives
 from nurbsfeed.interpolate import interpolate
 from nurbsfeed.machine import load_machine, machine_from_mapping
 from nurbsfeed.pipeline import convert_file, plan_block
 from nurbsfeed.planning.path_model import frames, jump_limits, motion_ratio
-from nurbsfeed.planning.planner import plan_curve
+from nurbsfeed.planning.planner import least_cycle_s, plan_curve
 from nurbsfeed.readers.json_curves import read_json_curves
 from nurbsfeed.safety import MotionGuard
 from tests.bench.dense_curves import dense_curves
@@ -304,3 +304,26 @@ def test_random_curves_keep_every_path_limit_at_a_sane_cycle(curve: NurbsCurve,
         worst = _worst_over_limits(result.points, result.period_s, lim)
         assert max(worst.values()) <= FROM_POSITIONS, worst
     MotionGuard(lim, curve.name).check(result.points)
+
+
+def test_a_curve_too_slow_for_an_axis_is_refused_by_a_lower_bound_before_planning() -> None:
+    """The quarter circle moves X 10 mm: at max_vel_x_mm_s 0.001 no motion takes less than
+    10,000 s. The path model's fix rounds sample the law twice a period (19 M samples here), so
+    the refusal at max_curve_time_s 3,600 took 53 s of CPU; the bound refuses it first."""
+    _, [(curve, feed)] = read_json_curves(ROOT / "samples" / "quarter-circle.json")
+    lim = machine_from_mapping({**PATH_PROFILE, "max_vel_x_mm_s": 0.001}, "test").limits
+    lim = dataclasses.replace(lim, feed_mm_s=min(lim.feed_mm_s, feed))
+    with pytest.raises(CurveError, match=r"^cycle of at least 10000 s exceeds max_curve_time_s "
+                                         r"= 3600 s"):
+        plan_curve(curve, lim, max_curve_time_s=3600.0)
+
+
+@pytest.mark.parametrize("curve", dense_curves(quick=True)[:3], ids=lambda c: c.name)
+def test_the_lower_bound_is_below_every_planned_cycle_and_not_trivial(curve: NurbsCurve) -> None:
+    """Each grid interval lasts at least its arc over the feed and each axis's travel over its
+    limit: never more than the plan's cycle, and at least the arc at the feed."""
+    lim = machine_from_mapping(PATH_PROFILE, "test").limits
+    plan = plan_curve(curve, lim)
+    fcap = np.full(plan.grid.u.size, np.inf)
+    least = least_cycle_s(curve, plan.grid, lim, fcap)
+    assert plan.length_mm / lim.feed_mm_s <= least <= plan.cycle_time_s

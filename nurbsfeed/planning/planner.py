@@ -414,9 +414,24 @@ def _hidden_peak(seg, s_mm, limit, key_node, key_s, v, peak, hold_start, hold_en
     return accel_end, decel_start
 
 
-def _too_long(cycle_s: float, max_curve_time_s: float) -> str:
-    return (f"planned cycle {cycle_s:.6g} s exceeds max_curve_time_s = {max_curve_time_s:g} s "
+def _too_long(cycle_s: float, max_curve_time_s: float, least: bool = False) -> str:
+    what = "cycle of at least" if least else "planned cycle"
+    return (f"{what} {cycle_s:.6g} s exceeds max_curve_time_s = {max_curve_time_s:g} s "
             "(raise it in the profile or with --max-curve-time-s)")
+
+
+def least_cycle_s(curve: NurbsCurve, grid: Grid, lim: Limits, fcap: np.ndarray) -> float:
+    """A lower bound on the cycle of any motion along the curve that keeps the feed and every
+    axis's velocity limit: each grid interval lasts at least its arc over the larger feed cap
+    at its ends, and each axis's travel across it over that axis's limit.
+
+    The path model checks it against max_curve_time_s before its fix rounds, which sample the
+    law twice a period: a quarter circle under max_vel_x_mm_s 0.001 (10 mm of X travel, at
+    least 10,000 s) took 53 s of CPU to be refused at 3,600 s."""
+    travel = np.abs(np.diff(curve.point(grid.u), axis=0))
+    axis_s = np.max(travel / np.asarray(lim.axis_vel_mm_s), axis=1)
+    cap = np.minimum(np.maximum(fcap[:-1], fcap[1:]), lim.feed_mm_s)
+    return float(np.sum(np.maximum(np.diff(grid.s_mm) / cap, axis_s)))
 
 
 class _OnGrid(NamedTuple):
@@ -688,6 +703,9 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
     hidden_slowdown = _hidden_slowdown(curve, grid, lim, feed_u, feed_mm_s, on.peak,
                                        on.hidden_peak_s)
     if path:
+        least = least_cycle_s(curve, grid, lim, fcap)
+        if not least <= max_curve_time_s:
+            raise CurveError(_too_long(least, max_curve_time_s, least=True))
         # where the S-curves' own acceleration and jerk break a path limit, lower the limit
         # there and plan again (PATH_FIX_ROUNDS at most, keeping the plan whose cycle after the
         # uniform slowdown that is left is the shortest): one needle of a 0.14 um hook beside
