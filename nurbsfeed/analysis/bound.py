@@ -54,6 +54,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.optimize import linprog
 
+from nurbsfeed.geometry.kernel import eval3_on_spans
 from nurbsfeed.geometry.nurbs import NurbsCurve
 from nurbsfeed.planning.limits import Limits
 
@@ -99,32 +100,20 @@ class Geometry:
 
 def derivatives3(curve: NurbsCurve, u: np.ndarray, spans: np.ndarray | None = None
                  ) -> np.ndarray:
-    """C, C', C'', C''' at u: (M,) -> (4, M, 3), from the span polynomials.
+    """C and its first three derivatives at u: (M,) -> (4, M, 3), from the span polynomials
+    (`geometry.kernel.eval3_on_spans`).
 
     spans (M,) picks the span each u is evaluated on (a knot's left limit is the span before
-    it); by default the one with knots[i] <= u < knots[i+1]. Each span's Taylor expansion of
-    (A, W) at its nearer end is differentiated term by term, then the quotient rule:
-    C''' = (A''' - 3 W' C'' - 3 W'' C' - W''' C) / W.
+    it); by default the one with knots[i] <= u < knots[i+1].
     """
-    u = np.asarray(u, dtype=float)
-    knots, p = curve.knots, curve.degree
+    u = np.array(np.ravel(u), dtype=float)
+    p = curve.degree
     if spans is None:
-        spans = np.clip(np.searchsorted(knots, u, side="right") - 1, p, curve.n_ctrl - 1)
-    start, end = knots[spans], knots[spans + 1]
-    side = (u - start > end - u).astype(int)
-    t = u - np.where(side == 0, start, end)
-    coef = curve.span_polynomials[spans, side]  # (M, p+1, 4): (A, W)^(k) / k!
-    aw = np.zeros((4, u.size, 4))  # (A, W) and three derivatives
-    for order in range(4):
-        for k in range(order, p + 1):
-            falling = math.factorial(k) / math.factorial(k - order)
-            aw[order] += falling * coef[:, k, :] * t[:, None] ** (k - order)
-    a, w = aw[..., :3], aw[..., 3:]
-    c0 = a[0] / w[0]
-    c1 = (a[1] - w[1] * c0) / w[0]
-    c2 = (a[2] - 2 * w[1] * c1 - w[2] * c0) / w[0]
-    c3 = (a[3] - 3 * w[1] * c2 - 3 * w[2] * c1 - w[3] * c0) / w[0]
-    return np.stack([c0, c1, c2, c3])
+        spans = np.clip(np.searchsorted(curve.knots, u, side="right") - 1, p, curve.n_ctrl - 1)
+    out = np.empty((4, u.size, 3))
+    eval3_on_spans(curve.knots, curve.span_polynomials, p, u,
+                   np.ascontiguousarray(spans, dtype=np.int64), out)
+    return out
 
 
 def geometry(curve: NurbsCurve, u: np.ndarray, spans: np.ndarray | None = None) -> Geometry:

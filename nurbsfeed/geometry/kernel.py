@@ -381,3 +381,16 @@ def eval_many(knots, coef, degree, u, order, out):
                 out[2, q, 0] = c2x
                 out[2, q, 1] = c2y
                 out[2, q, 2] = c2z
+
+
+@jit
+def eval3_on_spans(knots, coef, degree, u, spans, out):
+    """C and its first three derivatives at every u, each on the span given for it (spans (M,):
+    a knot's left limit is the span before it, which `eval_many`'s search never picks):
+    out (4, M, 3). For `analysis.bound`, whose cells end on knots from the left."""
+    for q in range(u.size):
+        d = point_d3(knots, coef, degree, spans[q], u[q])
+        out[0, q, 0], out[0, q, 1], out[0, q, 2] = d[0], d[1], d[2]
+        out[1, q, 0], out[1, q, 1], out[1, q, 2] = d[3], d[4], d[5]
+        out[2, q, 0], out[2, q, 1], out[2, q, 2] = d[6], d[7], d[8]
+        out[3, q, 0], out[3, q, 1], out[3, q, 2] = d[9], d[10], d[11]
