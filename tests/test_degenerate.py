@@ -274,3 +274,35 @@ def test_a_corner_across_a_zero_length_span_of_a_closed_curve_is_a_stop(tmp_path
     convert_file(source, target, machine)
     report = check_files(source, target, machine)
     assert report.ok, "\n".join(map(str, report.violations))
+
+
+@pytest.mark.parametrize("name", ["reversal-before-a-corner-knot",
+                                  "reversal-before-a-corner-knot-b"])
+def test_a_reversal_just_before_a_corner_knot_is_a_stop(tmp_path: Path, name: str) -> None:
+    """Fuzzer finds (seed 42): a rational quadratic along X turns back inside its first span,
+    0.015 mm before a knot of multiplicity 2 where it turns back again (a corner). The sample
+    at the knot takes the tangent of the span after it, which points back like the one of the
+    sample before the reversal, so their tangents showed no turn while the chord between them
+    went forward; the reversal was passed at 3.6 mm/s, and the motion guard refused the curve
+    (3,713 and 7,046 mm/s^2 against 2,828). Every sign change of x'(u), found here by dense
+    sampling, must be a stop node."""
+    source = CASES / f"{name}.ngc"
+    curve = next(item.curve for item in read_program(source) if hasattr(item, "curve"))
+    assert np.all(curve.points[:, 1:] == 0.0)
+    u = np.linspace(curve.u_min, curve.u_max, 2_000_001)
+    dx = curve.derivatives(u)[1][:, 0]
+    flips = u[np.flatnonzero(np.sign(dx[:-1]) * np.sign(dx[1:]) < 0)]
+    # the reversal inside the first span, then the corner's turn back at the knot that ends it
+    # (and, in the first program, a third at its knot 6/7, where two equal control points meet)
+    corner = np.unique(curve.knots)[1]
+    assert flips.size >= 2 and abs(flips[1] - corner) <= 1e-6
+    assert 0 < corner - flips[0] < 0.1 * (curve.u_max - curve.u_min)
+    machine = load_machine("default")
+    plan = plan_curve(curve, machine.limits)
+    stops = plan.grid.u[plan.grid.stop_index]
+    for flip in flips:
+        assert np.min(np.abs(stops - flip)) <= 1e-6, (flip, stops)
+    target = tmp_path / "out.nc"
+    convert_file(source, target, machine)
+    report = check_files(source, target, machine)
+    assert report.ok, "\n".join(map(str, report.violations))

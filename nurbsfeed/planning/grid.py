@@ -572,7 +572,8 @@ def _near_cusp_turn(knots, coef, degree, u0):
 
 
 @jit
-def _stops(knots, coef, degree, breaks, u, speed, tangent, zero_speed, floor_mm, kappa_floor):
+def _stops(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed, floor_mm,
+           kappa_floor):
     """Step 3: the interior points where C' vanishes and the motion must come to rest.
 
     Candidates are the samples where |C'| has a local minimum below ZERO_CANDIDATE_REL of its
@@ -621,11 +622,20 @@ def _stops(knots, coef, degree, breaks, u, speed, tangent, zero_speed, floor_mm,
             near[n_near] = at
             n_near += 1
     # a cusp or reversal between two samples need not show as a minimum of |C'| on them (|C'|
-    # may fall on through it); the tangent turning back by more than 90 degrees does
+    # may fall on through it); the tangent turning back by more than 90 degrees does, and so
+    # does a chord going back along the first sample's tangent (by more than floor_mm, beyond
+    # rounding): C'.t must change sign inside. A reversal just before a corner knot,
+    # whose sample takes the tangent after the knot, leaves both tangents pointing back while
+    # the curve between them went forward
     for q in range(last):
         turn = (tangent[q, 0] * tangent[q + 1, 0] + tangent[q, 1] * tangent[q + 1, 1]
                 + tangent[q, 2] * tangent[q + 1, 2])
-        if turn >= 0.0 or speed[q] <= zero_speed or speed[q + 1] <= zero_speed:
+        cx = pts[q + 1, 0] - pts[q, 0]
+        cy = pts[q + 1, 1] - pts[q, 1]
+        cz = pts[q + 1, 2] - pts[q, 2]
+        ahead = tangent[q, 0] * cx + tangent[q, 1] * cy + tangent[q, 2] * cz
+        if speed[q] <= zero_speed or speed[q + 1] <= zero_speed or (
+                turn >= 0.0 and ahead >= -floor_mm):
             continue
         at, at_speed = _refine_zero(knots, coef, degree, 0.5 * (u[q] + u[q + 1]), u[q],
                                     u[q + 1])
@@ -982,8 +992,8 @@ def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, f
                                                 u[idx[k] + 1], kappa_floor)
         peak_u[k] = refined_u if refined_kappa > kappa[idx[k]] else u[idx[k]]
     corner_u = _corners(knots, coef, degree, breaks, floor_mm)
-    zero_u, zero_cos, near_u = _stops(knots, coef, degree, breaks, u, speed, tan, zero_speed,
-                                      floor_mm, kappa_floor)
+    zero_u, zero_cos, near_u = _stops(knots, coef, degree, breaks, u, speed, pts, tan,
+                                      zero_speed, floor_mm, kappa_floor)
     stop_u = np.concatenate((corner_u, zero_u))
     stop_cos = np.concatenate((np.zeros(corner_u.size), zero_cos))
     order = np.argsort(stop_u)
