@@ -237,13 +237,26 @@ def test_a_reversal_beside_a_double_knot_is_a_stop(tmp_path: Path) -> None:
     curve). Every sign change of x'(u), found here by dense sampling, must be a stop node."""
     source = CASES / "double-knot-reversal.nc"
     curves = [item.curve for item in read_program(source) if hasattr(item, "curve")]
-    machine = load_machine("default")
     curve = curves[2]  # the third curve lies on the X axis: a sign change of x' is a reversal
+    flips = x_reversals(curve)
+    assert flips.size == 3
+    assert_stops_at_and_check_passes(source, curve, flips, tmp_path)
+
+
+def x_reversals(curve: NurbsCurve) -> np.ndarray:
+    """The parameters where a curve lying on the X axis turns back: the sign changes of x'(u),
+    by dense sampling."""
     assert np.all(curve.points[:, 1:] == 0.0)
     u = np.linspace(curve.u_min, curve.u_max, 2_000_001)
     dx = curve.derivatives(u)[1][:, 0]
-    flips = u[np.flatnonzero(np.sign(dx[:-1]) * np.sign(dx[1:]) < 0)]
-    assert flips.size == 3
+    return u[np.flatnonzero(np.sign(dx[:-1]) * np.sign(dx[1:]) < 0)]
+
+
+def assert_stops_at_and_check_passes(source: Path, curve: NurbsCurve, flips: np.ndarray,
+                                     tmp_path: Path) -> None:
+    """Under the default profile every parameter of `flips` is a stop node of the curve's
+    plan (within 1e-6), and `source` converts to a program `check` passes."""
+    machine = load_machine("default")
     plan = plan_curve(curve, machine.limits)
     stops = plan.grid.u[plan.grid.stop_index]
     for flip in flips:
@@ -288,21 +301,10 @@ def test_a_reversal_just_before_a_corner_knot_is_a_stop(tmp_path: Path, name: st
     sampling, must be a stop node."""
     source = CASES / f"{name}.ngc"
     curve = next(item.curve for item in read_program(source) if hasattr(item, "curve"))
-    assert np.all(curve.points[:, 1:] == 0.0)
-    u = np.linspace(curve.u_min, curve.u_max, 2_000_001)
-    dx = curve.derivatives(u)[1][:, 0]
-    flips = u[np.flatnonzero(np.sign(dx[:-1]) * np.sign(dx[1:]) < 0)]
+    flips = x_reversals(curve)
     # the reversal inside the first span, then the corner's turn back at the knot that ends it
     # (and, in the first program, a third at its knot 6/7, where two equal control points meet)
     corner = np.unique(curve.knots)[1]
     assert flips.size >= 2 and abs(flips[1] - corner) <= 1e-6
     assert 0 < corner - flips[0] < 0.1 * (curve.u_max - curve.u_min)
-    machine = load_machine("default")
-    plan = plan_curve(curve, machine.limits)
-    stops = plan.grid.u[plan.grid.stop_index]
-    for flip in flips:
-        assert np.min(np.abs(stops - flip)) <= 1e-6, (flip, stops)
-    target = tmp_path / "out.nc"
-    convert_file(source, target, machine)
-    report = check_files(source, target, machine)
-    assert report.ok, "\n".join(map(str, report.violations))
+    assert_stops_at_and_check_passes(source, curve, flips, tmp_path)
