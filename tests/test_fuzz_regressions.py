@@ -12,8 +12,9 @@ import pytest
 from click.testing import CliRunner
 
 from nurbsfeed.analysis.check.curve_checks import foot_arcs
-from nurbsfeed.analysis.check.projection import project_points_and_others
+from nurbsfeed.analysis.check.projection import feet_ahead_of_behind, project_points_and_others
 from nurbsfeed.cli import main
+from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.interpolate import interpolate
 from nurbsfeed.machine import load_machine
 from nurbsfeed.pipeline import plan_block
@@ -267,3 +268,28 @@ def test_the_arc_between_two_feet_is_the_curves_own(source: Path) -> None:
         speed = block.curve.speed(u)
         arc = float(np.sum(0.5 * (speed[1:] + speed[:-1]) * np.diff(u)))
         assert between[k] == pytest.approx(arc, rel=1e-4), (k, foot[k], other[k])
+
+
+def test_check_passes_a_point_written_on_the_same_position_past_a_turn_back(
+        tmp_path: Path) -> None:
+    """Fuzz seed 44 (gcode family, gcode-4400149-302): a Fanuc curve of repeated control
+    points turns back on the Y axis; the point two periods past the turn-back rounds to the
+    position of the point two before it, on the leg in. The walk gave it that point's foot
+    and no other, and `check` failed the output at 1.003x the tangential jerk while its trace
+    keeps J_t (49,972 mm/s^3 at full precision). A foot behind one taken before it is now
+    looked for again past that one (`feet_ahead_of_behind`), and the arc between is allowed."""
+    source = ROOT / "tests" / "data" / "check-turns" / "turn-back-same-position.nc"
+    outcome = check_case(tmp_path, "in.nc", source.read_bytes())
+    assert outcome.exit_code == 0 and outcome.problem is None, outcome
+
+
+def test_a_foot_behind_the_walk_gets_the_foot_past_the_turn_back() -> None:
+    """On a curve that runs out along X and back, a point on the leg in placed after a point
+    nearer the turn-back gets, as its other foot, the mirror parameter on the leg back."""
+    curve = NurbsCurve.build(1, [0.0, 0.0, 0.5, 1.0, 1.0],
+                             [[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    u = np.array([0.2, 0.45, 0.4])  # the third is behind the second: past the turn at 0.5
+    targets = curve.point(u)
+    other = feet_ahead_of_behind(curve, targets, u, np.full(3, np.nan), 1e-9)
+    assert np.isnan(other[:2]).all()
+    assert other[2] == pytest.approx(0.6, abs=1e-9)

@@ -16,7 +16,10 @@ from nurbsfeed.analysis.check.estimates import (
     turning_rad,
 )
 from nurbsfeed.analysis.check.output_program import Section, decode_moves
-from nurbsfeed.analysis.check.projection import project_points_and_others
+from nurbsfeed.analysis.check.projection import (
+    feet_ahead_of_behind,
+    project_points_and_others,
+)
 from nurbsfeed.analysis.check.report import Estimation, Findings
 from nurbsfeed.analysis.geometry import arc_length_mm, chord_errors_mm, curvature_1_mm
 from nurbsfeed.gcode.writer import round_ticks, written_decimals
@@ -235,6 +238,7 @@ def check_section(section: Section, block: CurveBlock, machine: Machine,
     dev_allow = r * (1.0 + NUMERIC_REL_TOL)
     u, dist, other = project_points_and_others(curve, pos, 2.0 * r, dev_allow,
                                                ANCHOR_ROUNDINGS * (r + lim.chord_mm))
+    other = feet_ahead_of_behind(curve, pos, u, other, dev_allow)
     findings.measure("path-deviation", dist[1:], 0.0, dev_allow, lines)
     end_gap = float(np.linalg.norm(pos[-1] - curve.points[-1]))
     if end_gap > dev_allow:

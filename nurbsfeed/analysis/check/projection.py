@@ -416,3 +416,41 @@ def nearest_on_curve(curve: NurbsCurve, targets: np.ndarray) -> tuple[np.ndarray
                 if d2[best] < out[i] ** 2:
                     foot[i], out[i] = fine[best], np.sqrt(d2[best])
     return foot, out
+
+
+BEHIND_REACH = 4.0  # a foot behind the walk is looked for again this many times as far ahead
+BEHIND_SAMPLES = 2049
+
+
+def feet_ahead_of_behind(curve: NurbsCurve, targets: np.ndarray, u: np.ndarray,
+                         other: np.ndarray, accept_mm: float) -> np.ndarray:
+    """`other` (N,) with, for each point whose foot lies behind a foot taken before it (the
+    motion's parameter never runs back: the point is past a turn-back, within rounding of the
+    leg in), the nearest foot within accept_mm at or past the farthest foot before it, when it
+    has none yet (fuzz seed 44: a point written on the same position as one before the
+    turn-back got that point's foot and no other, and its arc was off by three roundings).
+    Sought on BEHIND_REACH times the way back past that foot, by dense sampling refined by
+    golden section."""
+    out = other.copy()
+    ahead = np.maximum.accumulate(u)
+    behind = np.flatnonzero((u[1:] < ahead[:-1]) & np.isnan(other[1:])) + 1
+    for q in behind:
+        lo = ahead[q - 1]
+        hi = min(curve.u_max, lo + BEHIND_REACH * (lo - u[q]))
+        if not hi > lo:
+            continue
+        grid = np.linspace(lo, hi, BEHIND_SAMPLES)
+        d2 = np.sum((curve.point(grid) - targets[q]) ** 2, axis=1)
+        k = int(np.argmin(d2))
+        a, b = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
+        for _ in range(60):
+            x1, x2 = b - GOLDEN * (b - a), a + GOLDEN * (b - a)
+            f1, f2 = np.sum((curve.point(np.array([x1, x2])) - targets[q]) ** 2, axis=1)
+            if f1 <= f2:
+                b = x2
+            else:
+                a = x1
+        foot = 0.5 * (a + b)
+        if np.sum((curve.point(np.array([foot]))[0] - targets[q]) ** 2) <= accept_mm**2:
+            out[q] = foot
+    return out
