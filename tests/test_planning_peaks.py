@@ -16,6 +16,7 @@ from nurbsfeed.interpolate import interpolate
 from nurbsfeed.machine import load_machine
 from nurbsfeed.planning.grid import _near_cusp_peaks
 from nurbsfeed.planning.planner import plan_curve
+from nurbsfeed.readers import read_program
 from tests.limits_check import measure
 
 DATA = Path(__file__).parent / "data" / "peaks"
@@ -204,3 +205,27 @@ def test_a_hairpin_conversion_passes_check_and_its_jerk_vector_holds(tmp_path: P
         jerk = np.diff(pos, 3, axis=0) / lim.period_s**3
         worst = max(worst, float(np.linalg.norm(jerk, axis=1).max(initial=0.0)))
     assert worst <= 1.02 * np.hypot(lim.jerk_mm_s3, lim.normal_jerk_mm_s3), worst
+
+
+def test_a_peak_inside_the_first_interval_after_a_knot_is_planned(tmp_path: Path) -> None:
+    """Fuzz seed 45 (gcode-4500152-167): after the knot u = 8/9 of a cubic, kappa falls from
+    14.7 to 6.7, rises to 23.1 and falls to 14.6, all inside the first sample interval, whose
+    ends (14.7, 14.6) showed nothing: the plan passed the peak at 5.1 mm/s, v^3 kappa^2 1.42x
+    the normal-jerk limit (4.54 mm/s there), and `check` failed the output. kappa at an
+    interval's middle, more than 10 % above both ends, now splits it. The dense maximum of
+    kappa in the span is a peak node, and the conversion passes `check`."""
+    source = DATA / "peak-after-a-knot-between-nodes.ngc"
+    curve = next(item.curve for item in read_program(source) if hasattr(item, "curve"))
+    u = np.linspace(8 / 9, 1.0, 1_000_001)
+    _, c1, c2 = curve.derivatives(u)
+    kappa = curvature_from_derivatives(c1, c2)
+    top = u[int(np.nanargmax(kappa))]
+    assert np.nanmax(kappa) > 20.0
+    plan = plan_curve(curve, load_machine("default").limits)
+    peaks = plan.grid.u[plan.grid.peak_index]
+    assert np.min(np.abs(peaks - top)) <= 1e-5, (top, peaks)
+    target = tmp_path / "out.nc"
+    converted = CliRunner().invoke(main, ["convert", str(source), "-o", str(target)])
+    assert converted.exit_code == 0, converted.output
+    checked = CliRunner().invoke(main, ["check", str(source), str(target)])
+    assert checked.exit_code == 0, checked.output
