@@ -419,7 +419,6 @@ def nearest_on_curve(curve: NurbsCurve, targets: np.ndarray) -> tuple[np.ndarray
 
 
 BEHIND_REACH = 4.0  # a foot behind the walk is looked for again this many times as far ahead
-BEHIND_SAMPLES = 2049
 
 
 def feet_ahead_of_behind(curve: NurbsCurve, targets: np.ndarray, u: np.ndarray,
@@ -429,28 +428,20 @@ def feet_ahead_of_behind(curve: NurbsCurve, targets: np.ndarray, u: np.ndarray,
     leg in), the nearest foot within accept_mm at or past the farthest foot before it, when it
     has none yet (fuzz seed 44: a point written on the same position as one before the
     turn-back got that point's foot and no other, and its arc was off by three roundings).
-    Sought on BEHIND_REACH times the way back past that foot, by dense sampling refined by
-    golden section."""
+    Sought on BEHIND_REACH times the way back past that foot by `_scan`."""
     out = other.copy()
     ahead = np.maximum.accumulate(u)
     behind = np.flatnonzero((u[1:] < ahead[:-1]) & np.isnan(other[1:])) + 1
+    degree = curve.degree
+    work = [np.empty(degree + 1) for _ in range(4)] + [np.empty(3), np.empty(3)]
     for q in behind:
         lo = ahead[q - 1]
         hi = min(curve.u_max, lo + BEHIND_REACH * (lo - u[q]))
         if not hi > lo:
             continue
-        grid = np.linspace(lo, hi, BEHIND_SAMPLES)
-        d2 = np.sum((curve.point(grid) - targets[q]) ** 2, axis=1)
-        k = int(np.argmin(d2))
-        a, b = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
-        for _ in range(60):
-            x1, x2 = b - GOLDEN * (b - a), a + GOLDEN * (b - a)
-            f1, f2 = np.sum((curve.point(np.array([x1, x2])) - targets[q]) ** 2, axis=1)
-            if f1 <= f2:
-                b = x2
-            else:
-                a = x1
-        foot = 0.5 * (a + b)
-        if np.sum((curve.point(np.array([foot]))[0] - targets[q]) ** 2) <= accept_mm**2:
+        tx, ty, tz = (float(c) for c in targets[q])
+        foot, dist2, _ = _scan(curve.knots, curve.homogeneous, degree, curve.homogeneous.shape[0],
+                               lo, hi, lo, math.inf, degree, tx, ty, tz, *work)
+        if dist2 <= accept_mm**2:
             out[q] = foot
     return out
