@@ -34,10 +34,11 @@ from nurbsfeed.errors import (
     Location,
     NurbsfeedError,
 )
-from nurbsfeed.machine import FLOAT_KEYS, INT_KEYS, JERK_MODELS, load_machine
+from nurbsfeed.machine import FLOAT_KEYS, INT_KEYS, JERK_MODELS, PLANNERS, load_machine
 
 if TYPE_CHECKING:
     from nurbsfeed.machine import Machine
+    from nurbsfeed.planning.planner import Plan
     from nurbsfeed.program import CurveBlock
 
 TAYLOR1_WARNING = ("nurbsfeed: warning: taylor1 is the paper's first-order baseline; its points "
@@ -127,13 +128,15 @@ def machine_options(func: Callable[..., Any]) -> Callable[..., Any]:
                             help=f"Override the profile's {key}.")(func)
     func = click.option("--jerk-model", "jerk_model", type=click.Choice(list(JERK_MODELS)),
                         default=None, help="Override the profile's jerk_model.")(func)
+    func = click.option("--planner", "planner", type=click.Choice(list(PLANNERS)),
+                        default=None, help="Override the profile's planner.")(func)
     return click.option("--machine", "-m", default="default", show_default=True,
                         help="Machine profile: a built-in name (default, linuxcnc, "
                              "paper-table1) or a YAML file.")(func)
 
 
 def machine_from(kwargs: dict[str, Any]) -> Machine:
-    overrides = {k: kwargs.pop(k) for k in FLOAT_KEYS + INT_KEYS + ("jerk_model",)}
+    overrides = {k: kwargs.pop(k) for k in FLOAT_KEYS + INT_KEYS + ("jerk_model", "planner")}
     return load_machine(kwargs.pop("machine"), overrides)
 
 
@@ -478,7 +481,6 @@ def plan(input: Path, dialect: str, reference: bool, **kwargs: Any) -> None:
     from nurbsfeed.analysis import time_optimal_bound_s
     from nurbsfeed.pipeline import plan_block
     from nurbsfeed.planning.planner import KIND_NAMES
-    from nurbsfeed.planning.scurve import transition_distance_mm
     from nurbsfeed.program import CurveBlock
     from nurbsfeed.readers import read_program
 
@@ -500,9 +502,10 @@ def plan(input: Path, dialect: str, reference: bool, **kwargs: Any) -> None:
         click.echo(f"curve {index} {item.curve.name} ({item.location})")
         click.echo(f"  degree {item.curve.degree}, {item.curve.n_ctrl} control points, "
                    f"length {p.length_mm:.6f} {unit}")
+        keys = (f"{len(p.key_node)} rests (the optimal planner's keys)" if p.planner == "optimal"
+                else f"{len(p.key_node)} key points after {p.fix_rounds} limit-fix rounds")
         click.echo(f"  kappa0 {p.kappa0_1_mm:.6g} 1/{unit}; {p.n_peaks_above_threshold} "
-                   f"curvature peaks >= kappa0; {len(p.key_node)} key points after "
-                   f"{p.fix_rounds} limit-fix rounds")
+                   f"curvature peaks >= kappa0; {keys}")
         click.echo(f"  {'#':>3} {'kind':<6} {'u':>12} {'s':>12} {'kappa':>12} "
                    f"{'nominal':>10} {'scanned':>10}")
         for k, node in enumerate(p.key_node):
@@ -510,19 +513,10 @@ def plan(input: Path, dialect: str, reference: bool, **kwargs: Any) -> None:
                        f"{item.curve.input_u(p.grid.u[node]):>12.8f} "
                        f"{p.grid.s_mm[node]:>12.6f} {p.grid.kappa_1_mm[node]:>12.6g} "
                        f"{p.key_nominal_mm_s[k]:>10.4f} {p.key_v_mm_s[k]:>10.4f}")
-        a, j = p.scurve_acc_mm_s2, p.scurve_jerk_mm_s3
-        click.echo(f"  segments ({unit}, {unit}/s):")
-        click.echo(f"  {'#':>3} {'length':>12} {'v_start':>10} {'v_peak':>10} {'v_end':>10} "
-                   f"{'hold_in':>9} {'hold_out':>9} {'cruise':>10}")
-        key_s = p.key_s_mm
-        for i in range(len(p.key_node) - 1):
-            length = key_s[i + 1] - key_s[i]
-            vs, ve, vp = p.key_v_mm_s[i], p.key_v_mm_s[i + 1], p.seg_peak_mm_s[i]
-            cruise = (length - p.seg_hold_start_mm[i] - p.seg_hold_end_mm[i]
-                      - transition_distance_mm(vs, vp, a, j) - transition_distance_mm(vp, ve, a, j))
-            click.echo(f"  {i:>3} {length:>12.6f} {vs:>10.4f} {vp:>10.4f} {ve:>10.4f} "
-                       f"{p.seg_hold_start_mm[i]:>9.4f} {p.seg_hold_end_mm[i]:>9.4f} "
-                       f"{max(cruise, 0.0):>10.4f}")
+        if p.planner == "optimal":
+            _echo_stretches(p, unit)
+        else:
+            _echo_segments(p, unit)
         bound = time_optimal_bound_s(p)
         click.echo(f"  cycle time {p.cycle_time_s:.3f} s ({p.n_periods} periods of "
                    f"{lim.period_s * 1e3:g} ms; time scale {p.time_scale:.9f})")
@@ -534,6 +528,36 @@ def plan(input: Path, dialect: str, reference: bool, **kwargs: Any) -> None:
         index += 1
     if index == 0:
         click.echo("no NURBS curves in the input")
+
+
+def _echo_segments(p: Plan, unit: str) -> None:
+    """The S-curve plan's segments between key points."""
+    from nurbsfeed.planning.scurve import transition_distance_mm
+
+    a, j = p.scurve_acc_mm_s2, p.scurve_jerk_mm_s3
+    click.echo(f"  segments ({unit}, {unit}/s):")
+    click.echo(f"  {'#':>3} {'length':>12} {'v_start':>10} {'v_peak':>10} {'v_end':>10} "
+               f"{'hold_in':>9} {'hold_out':>9} {'cruise':>10}")
+    key_s = p.key_s_mm
+    for i in range(len(p.key_node) - 1):
+        length = key_s[i + 1] - key_s[i]
+        vs, ve, vp = p.key_v_mm_s[i], p.key_v_mm_s[i + 1], p.seg_peak_mm_s[i]
+        cruise = (length - p.seg_hold_start_mm[i] - p.seg_hold_end_mm[i]
+                  - transition_distance_mm(vs, vp, a, j) - transition_distance_mm(vp, ve, a, j))
+        click.echo(f"  {i:>3} {length:>12.6f} {vs:>10.4f} {vp:>10.4f} {ve:>10.4f} "
+                   f"{p.seg_hold_start_mm[i]:>9.4f} {p.seg_hold_end_mm[i]:>9.4f} "
+                   f"{max(cruise, 0.0):>10.4f}")
+
+
+def _echo_stretches(p: Plan, unit: str) -> None:
+    """The optimal plan's stretches between rests: its keys are the rests alone."""
+    click.echo(f"  optimal schedule: {p.fix_rounds} limit-fix rounds, uniform slowdown "
+               f"{p.uniform_slowdown:.4f}; stretches between rests ({unit}, {unit}/s):")
+    click.echo(f"  {'#':>3} {'length':>12} {'v_peak':>10} {'periods':>10}")
+    key_s = p.key_s_mm
+    for i in range(len(p.key_node) - 1):
+        click.echo(f"  {i:>3} {key_s[i + 1] - key_s[i]:>12.6f} {p.seg_peak_mm_s[i]:>10.4f} "
+                   f"{int(p.piece_periods[i]):>10}")
 
 
 def _reference_line(block: CurveBlock, machine: Machine, cycle_s: float, bound_s: float

@@ -8,6 +8,7 @@ stepping loop and the writer compute with in finite numbers.
 
 from __future__ import annotations
 
+import importlib.util
 import math
 import re
 from collections.abc import Mapping
@@ -66,6 +67,10 @@ FLOAT_KEYS = (REQUIRED_KEYS + ("max_curve_time_s", "min_block_time_s", "rest_mov
               + tuple(AXIS_KEYS))
 INT_KEYS = ("decimals", "feed_decimals", "move_periods")
 JERK_MODELS = ("paper", "path")  # profile key jerk_model (planning.path_model)
+# profile key planner: the paper's key points and S-curves, or planning.optimal (path model)
+PLANNERS = ("scurve", "optimal")
+OPTIMAL_NEEDS_SCIPY = ("planner: optimal needs scipy (its linear programs): "
+                       "pip install 'nurbsfeed[optimal]'")
 # The accepted values, ends included (README "Profile keys" says why each is physical).
 RANGES: dict[str, tuple[float, float]] = {
     "period_s": (1e-6, 1.0),
@@ -146,7 +151,7 @@ def machine_from_mapping(data: Any, where: str, places: Mapping[str, Location] |
     if not isinstance(data, dict):
         raise ProfileError("a machine profile is a mapping of keys to values, not "
                            f"{type(data).__name__}", here)
-    known = set(FLOAT_KEYS) | set(INT_KEYS) | {"jerk_model"}
+    known = set(FLOAT_KEYS) | set(INT_KEYS) | {"jerk_model", "planner"}
     for key in data:
         if key not in known:
             raise ProfileError(f"unknown key {_key_shown(key)} (known keys: "
@@ -167,8 +172,14 @@ def machine_from_mapping(data: Any, where: str, places: Mapping[str, Location] |
                            f"{_shown(jerk_model)}", places.get("jerk_model", here))
     if (overrides or {}).get("jerk_model") is not None:
         jerk_model = overrides["jerk_model"]  # type: ignore[index]
+    planner = data.get("planner", "scurve")
+    if planner not in PLANNERS:
+        raise ProfileError(f"'planner' must be one of {', '.join(PLANNERS)}, not "
+                           f"{_shown(planner)}", places.get("planner", here))
+    if (overrides or {}).get("planner") is not None:
+        planner = overrides["planner"]  # type: ignore[index]
     for key, value in (overrides or {}).items():
-        if key == "jerk_model":
+        if key in ("jerk_model", "planner"):
             continue
         if value is not None:
             try:
@@ -196,6 +207,12 @@ def machine_from_mapping(data: Any, where: str, places: Mapping[str, Location] |
         raise _refused(f"per-axis limits ({', '.join(axis_given)}) hold only under "
                        "jerk_model: path (the paper's model limits the path alone)",
                        (*axis_given, "jerk_model"), places, overrides, here)
+    if planner == "optimal" and jerk_model != "path":
+        raise _refused("planner: optimal plans under jerk_model: path only (the paper's planner "
+                       "is the paper's model's)", ("planner", "jerk_model"), places, overrides,
+                       here)
+    if planner == "optimal" and importlib.util.find_spec("scipy") is None:
+        raise _refused(OPTIMAL_NEEDS_SCIPY, ("planner",), places, overrides, here)
     axis: dict[str, list[float]] = {field: [math.inf] * 3 for field, _ in AXIS_KEYS.values()}
     for key in axis_given:
         field, i = AXIS_KEYS[key]
@@ -206,7 +223,7 @@ def machine_from_mapping(data: Any, where: str, places: Mapping[str, Location] |
     limits = Limits(path["period_s"], path["feed_mm_s"], path["chord_mm"], path["acc_mm_s2"],
                     path["jerk_mm_s3"], path["normal_acc_mm_s2"], path["normal_jerk_mm_s3"],
                     jerk_model, _xyz(axis["axis_vel_mm_s"]), _xyz(axis["axis_acc_mm_s2"]),
-                    _xyz(axis["axis_jerk_mm_s3"]))
+                    _xyz(axis["axis_jerk_mm_s3"]), planner)
     if "decimals" not in values:
         values["decimals"] = auto_decimals(limits, limits.period_s / move_periods)
     return Machine(limits, **values)  # type: ignore[arg-type]

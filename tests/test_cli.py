@@ -206,7 +206,7 @@ BAD_PROFILES = [
      "max_acc_z_mm_s2, max_curve_time_s, max_feed_mm_s, max_jerk_mm_s3, max_jerk_x_mm_s3, "
      "max_jerk_y_mm_s3, max_jerk_z_mm_s3, max_normal_acc_mm_s2, max_normal_jerk_mm_s3, "
      "max_vel_x_mm_s, max_vel_y_mm_s, max_vel_z_mm_s, min_block_time_s, move_periods, "
-     "period_s, rest_move_s)"),
+     "period_s, planner, rest_move_s)"),
     ("{base}\nchord_error_mm: .nan\n", "{p}:10:1: 'chord_error_mm' must be positive and finite, "
      "not nan"),
     ("{base}\nmax_acc_mm_s2: fast\n", "{p}:10:1: 'max_acc_mm_s2' must be a number, not 'fast'"),

@@ -150,17 +150,16 @@ def motion_ratio(f: Frames, v: np.ndarray, a: np.ndarray, j: np.ndarray,
     return ratio
 
 
-def jump_limits(curve: NurbsCurve, u_breaks: np.ndarray, lim: Limits,
-                zero_speed: float = 0.0) -> np.ndarray:
-    """At interior knots u_breaks (K,): the speed at which the jump D of kappa N there, read
-    over one period as v^2 |D| / T, keeps J_n and every axis's jerk (inf where kappa N does
-    not jump). kappa N = (C'' |C'|^2 - (C' . C'') C') / |C'|^4 on each side; the left side is
-    the span before the knot, evaluated one ulp below it. A side where |C'| <= zero_speed has
-    no frame to jump from (kappa N there is rounding noise, 1e15 beside a span of no length
-    once set a limit of 2e-14 mm/s): inf, the knot is a zero of C' that the grid handles (a
-    rest where the path turns back, kappa from inside the spans where it goes on)."""
+def kappa_n_jumps(curve: NurbsCurve, u_breaks: np.ndarray, zero_speed: float = 0.0
+                  ) -> np.ndarray:
+    """At interior knots u_breaks (K,): the jump D (K, 3) of kappa N there, 0 where it does not
+    jump. kappa N = (C'' |C'|^2 - (C' . C'') C') / |C'|^4 on each side; the left side is the
+    span before the knot, evaluated one ulp below it. A side where |C'| <= zero_speed has no
+    frame to jump from (kappa N there is rounding noise, 1e15 beside a span of no length once
+    set a limit of 2e-14 mm/s): 0, the knot is a zero of C' that the grid handles (a rest where
+    the path turns back, kappa from inside the spans where it goes on)."""
     if u_breaks.size == 0:
-        return np.empty(0)
+        return np.empty((0, 3))
 
     def kappa_n(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         _, c1, c2 = curve.derivatives(u)
@@ -175,13 +174,21 @@ def jump_limits(curve: NurbsCurve, u_breaks: np.ndarray, lim: Limits,
     left, left_speed = kappa_n(np.nextafter(u_breaks, -np.inf))
     framed = (np.minimum(left_speed, right_speed) > zero_speed)[:, None]
     jump = (right - left) * framed
+    size = np.sqrt(_dot(jump, jump))
+    # rounding noise where kappa N is continuous (a smooth knot) is no jump
+    real = size > JUMP_REL * np.sqrt(np.maximum(_dot(right, right), _dot(left, left)))
+    return jump * real[:, None]
+
+
+def jump_limits(curve: NurbsCurve, u_breaks: np.ndarray, lim: Limits,
+                zero_speed: float = 0.0) -> np.ndarray:
+    """At interior knots u_breaks (K,): the speed at which the jump D of kappa N there
+    (`kappa_n_jumps`), read over one period as v^2 |D| / T, keeps J_n and every axis's jerk
+    (inf where kappa N does not jump)."""
+    jump = kappa_n_jumps(curve, u_breaks, zero_speed)
     t = lim.period_s
     with np.errstate(divide="ignore"):
         size = np.sqrt(_dot(jump, jump))
-        # rounding noise where kappa N is continuous (a smooth knot) is no jump
-        size = np.where(size > JUMP_REL * np.sqrt(np.maximum(_dot(right, right),
-                                                             _dot(left, left))), size, 0.0)
-        jump = jump * (size > 0.0)[:, None]
         v = np.where(size > 0.0, np.sqrt(lim.normal_jerk_mm_s3 * t / np.where(size > 0.0, size,
                                                                               1.0)), np.inf)
         for x in range(3):

@@ -105,6 +105,9 @@ class Plan:
     # model, a share of the lowest limit they add to under the path model
     scurve_acc_mm_s2: float
     scurve_jerk_mm_s3: float
+    # "scurve": the paper's key points and S-curves; "optimal": planning.optimal's schedule,
+    # whose keys are the rests alone (the fields above describe the S-curve plan it started from)
+    planner: str = "scurve"
 
     @cached_property
     def n_periods(self) -> int:
@@ -616,21 +619,13 @@ def arc_parameters(curve: NurbsCurve, grid: Grid, s_mm: np.ndarray) -> np.ndarra
     return u
 
 
-def path_excess(curve: NurbsCurve, grid: Grid, law: TimeLaw,
-                lim: Limits) -> tuple[float, np.ndarray]:
-    """Where the law breaks a path-model limit: the uniform slowdown (>= 1) that would keep
-    them all, and per node (M,) the speed that would keep them where the law passes next to it
-    (inf elsewhere). The law is sampled PATH_SAMPLES_PER_PERIOD times a period, each sample's
-    parameter found from its arc length on the grid (`arc_parameters`), `path_model.
-    motion_ratio` there, except at zeros of C' (rests and removable zeros, where the frame is
-    rounding noise); a sample too fast by lambda asks v / lambda of both nodes around it. The
-    key points and the fix rounds keep the static terms; this covers what the S-curve's own
-    acceleration and jerk add (3 kappa v a across the path, -kappa^2 v^3 + j along it, a T_x
-    per axis)."""
-    worst = 1.0
-    caps = np.full(grid.u.size, np.inf)
+def law_ratios(curve: NurbsCurve, grid: Grid, law: TimeLaw, lim: Limits):
+    """The law sampled PATH_SAMPLES_PER_PERIOD times a period, PATH_CHUNK samples at a time:
+    per chunk, each sample's arc length, `path_model.motion_ratio` and v, three (N,) arrays.
+    Each sample's parameter comes from its arc length on the grid (`arc_parameters`); at a
+    zero of C' (a rest, or a removable zero) the frame is rounding noise and the ratio 0."""
     if law.duration_s <= 0.0:
-        return worst, caps
+        return
     n = max(2, int(math.ceil(law.duration_s / lim.period_s * PATH_SAMPLES_PER_PERIOD)) + 1)
     zero_speed = ZERO_SPEED_REL * float(curve.speed(grid.u).mean())
     for start in range(0, n, PATH_CHUNK):
@@ -639,8 +634,21 @@ def path_excess(curve: NurbsCurve, grid: Grid, law: TimeLaw,
         s_mm = law.s0_mm[piece] + local
         u = arc_parameters(curve, grid, s_mm)
         ratio = motion_ratio(frames(curve, u), v, a, j, lim)
-        # at a zero of C' (a rest, or a removable zero) the frame is rounding noise
         ratio[curve.speed(u) <= zero_speed] = 0.0
+        yield s_mm, ratio, v
+
+
+def path_excess(curve: NurbsCurve, grid: Grid, law: TimeLaw,
+                lim: Limits) -> tuple[float, np.ndarray]:
+    """Where the law breaks a path-model limit: the uniform slowdown (>= 1) that would keep
+    them all, and per node (M,) the speed that would keep them where the law passes next to it
+    (inf elsewhere), from `law_ratios`: a sample too fast by lambda asks v / lambda of both
+    nodes around it. The key points and the fix rounds keep the static terms; this covers what
+    the S-curve's own acceleration and jerk add (3 kappa v a across the path, -kappa^2 v^3 + j
+    along it, a T_x per axis)."""
+    worst = 1.0
+    caps = np.full(grid.u.size, np.inf)
+    for s_mm, ratio, v in law_ratios(curve, grid, law, lim):
         worst = max(worst, float(np.max(ratio)))
         bad = np.flatnonzero(ratio > 1.0)
         if bad.size:
@@ -741,6 +749,45 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
     for arr in (on.key_node, on.key_kind, on.nominal, on.v, on.peak, on.hold_start, on.hold_end,
                 piece_key, piece_periods, piece_scale):
         arr.setflags(write=False)
-    return Plan(curve, lim, grid, kappa0, int(on.n_peaks), on.key_node, on.key_kind, on.nominal,
+    plan = Plan(curve, lim, grid, kappa0, int(on.n_peaks), on.key_node, on.key_kind, on.nominal,
                 on.v, on.peak, on.hold_start, on.hold_end, law, slowdown, piece_key,
                 piece_periods, piece_scale, on.rounds, acc, jerk)
+    if lim.planner == "optimal":
+        return _optimal_plan(plan, feed_u, feed_mm_s)
+    return plan
+
+
+def _optimal_plan(base: Plan, feed_u: np.ndarray, feed_mm_s: np.ndarray) -> Plan:
+    """`planning.optimal`'s schedule as a plan, if it is faster than the S-curve plan `base`
+    (whose law is its first iterate and whose rests it keeps); else base."""
+    from nurbsfeed.planning.optimal import optimal_schedule
+
+    grid, law, lim = base.grid, base.law, base.limits
+    rest_keys = base.piece_key
+    rest_nodes = base.key_node[rest_keys]
+    # the base law's speed at the nodes, as it runs (each stretch slowed by its lambda)
+    v_nodes = np.empty(grid.u.size)
+    speed_at_arc(law.t0_s, law.s0_mm, law.v0_mm_s, law.a0_mm_s2, law.jerk_mm_s3,
+                 law.duration_s, np.ascontiguousarray(grid.s_mm), np.full(grid.u.size, -np.inf),
+                 v_nodes)
+    v_nodes /= float(base.piece_scale.max(initial=1.0))
+    schedule = optimal_schedule(base.curve, grid, lim, rest_nodes, v_nodes,
+                                lambda u: feed_at(u, feed_u, feed_mm_s))
+    if schedule is None or not schedule.law.duration_s < base.cycle_time_s:
+        return base
+    rest_nodes = schedule.rest_nodes
+    keys = np.searchsorted(base.key_node, rest_nodes)
+    kinds = base.key_kind[keys]
+    zeros = np.zeros(rest_nodes.size)
+    key_t = schedule.law.key_t_s
+    periods = np.rint(np.diff(key_t) / lim.period_s).astype(np.int64)
+    peaks = np.array([float(schedule.law.v0_mm_s[(schedule.law.t0_s >= key_t[k])
+                                                  & (schedule.law.t0_s < key_t[k + 1])]
+                            .max(initial=0.0)) for k in range(rest_nodes.size - 1)])
+    arrays = (rest_nodes, kinds, zeros, zeros.copy(), peaks, np.zeros(peaks.size),
+              np.zeros(peaks.size), np.arange(rest_nodes.size), periods, np.ones(periods.size))
+    for arr in arrays:
+        arr.setflags(write=False)
+    return Plan(base.curve, lim, grid, base.kappa0_1_mm, base.n_peaks_above_threshold,
+                *arrays[:7], schedule.law, schedule.slowdown, *arrays[7:], schedule.rounds,
+                base.scurve_acc_mm_s2, base.scurve_jerk_mm_s3, "optimal")

@@ -4,8 +4,9 @@ repository root:
     python -m tests.bench.reference            # the JSON samples and the short dense curves
     python -m tests.bench.reference --quick    # the quarter circle and the figure-eight only
 
-Each curve is planned under `paper-table1` and under `paper-table1` with `jerk_model: path`, and
-three cycle times are set side by side:
+Each curve is planned under `paper-table1`, and under `paper-table1` with `jerk_model: path` by
+both planners (`planner: scurve`, the paper's key points and S-curves, and `planner: optimal`,
+docs/design.md §2d), and three cycle times are set side by side:
 
 - the time-optimal bound (`analysis.common.time_optimal_bound_s`): rest to rest under the
   pointwise speed limit and |a| <= A_t alone, a lower bound on every schedule that keeps the
@@ -17,7 +18,8 @@ three cycle times are set side by side:
 The optimum lies between the bound and the smaller of the other two. planned / reference above 1
 says the planner is at least that far from the optimum; below 1, the reference is the looser
 (it is within 1.5 % of the closed form on a straight line, tests/test_bound.py). Measured here,
-never asserted; the reference takes seconds to minutes a curve (HiGHS, one process).
+never asserted; the reference and the optimal planner take seconds to minutes a curve (HiGHS,
+one process).
 """
 
 from __future__ import annotations
@@ -45,8 +47,10 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true",
                         help="the quarter circle and the figure-eight only")
     args = parser.parse_args()
-    machines = {"paper": load_machine(PROFILE), "path": load_machine(PROFILE,
-                                                                     {"jerk_model": "path"})}
+    machines = {"paper": load_machine(PROFILE),
+                "path": load_machine(PROFILE, {"jerk_model": "path"}),
+                "path optimal": load_machine(PROFILE, {"jerk_model": "path",
+                                                       "planner": "optimal"})}
     cases: list[tuple[str, NurbsCurve, np.ndarray, np.ndarray]] = []  # with programmed feeds
     for name in SAMPLES[:1] if args.quick else SAMPLES:
         for block in curve_blocks(ROOT / "samples" / name):
@@ -55,22 +59,30 @@ def main() -> None:
     for curve in dense[:1] if args.quick else dense:
         cases.append((curve.name, curve, np.empty(0), np.empty(0)))
     print(f"Cycle times in s under {PROFILE}'s limits; ratio = planned / reference.\n")
-    print("| curve | model | bound | reference | planned | ratio | reference CPU s |")
-    print("|---|---|---:|---:|---:|---:|---:|")
-    ratios: dict[str, list[float]] = {model: [] for model in machines}
+    print("| curve | model | planner | bound | reference | planned | ratio | planner CPU s "
+          "| reference CPU s |")
+    print("|---|---|---|---:|---:|---:|---:|---:|---:|")
+    ratios: dict[str, list[float]] = {setting: [] for setting in machines}
     for name, curve, feed_u, feed in cases:
-        for model, machine in machines.items():
-            plan = plan_curve(curve, machine.limits, feed_u, feed)
+        references: dict[str, tuple[float, float]] = {}
+        for setting, machine in machines.items():
+            model = machine.limits.jerk_model
             start = time.process_time()
-            ref = jerk_limited_schedule(curve, machine.limits, feed_u, feed)
-            cpu = time.process_time() - start
-            ratio = plan.cycle_time_s / ref.cycle_s
-            ratios[model].append(ratio)
-            print(f"| {name} | {model} | {time_optimal_bound_s(plan):.3f} | {ref.cycle_s:.3f} | "
-                  f"{plan.cycle_time_s:.3f} | {ratio:.3f} | {cpu:.1f} |")
+            plan = plan_curve(curve, machine.limits, feed_u, feed)
+            plan_cpu = time.process_time() - start
+            if model not in references:
+                start = time.process_time()
+                ref = jerk_limited_schedule(curve, machine.limits, feed_u, feed)
+                references[model] = (ref.cycle_s, time.process_time() - start)
+            ref_s, ref_cpu = references[model]
+            ratio = plan.cycle_time_s / ref_s
+            ratios[setting].append(ratio)
+            print(f"| {name} | {model} | {plan.planner} | {time_optimal_bound_s(plan):.3f} | "
+                  f"{ref_s:.3f} | {plan.cycle_time_s:.3f} | {ratio:.3f} | {plan_cpu:.1f} | "
+                  f"{ref_cpu:.1f} |", flush=True)
     print()
-    for model, values in ratios.items():
-        print(f"{model}: median ratio {statistics.median(values):.3f}, "
+    for setting, values in ratios.items():
+        print(f"{setting}: median ratio {statistics.median(values):.3f}, "
               f"largest {max(values):.3f} over {len(values)} curves")
 
 

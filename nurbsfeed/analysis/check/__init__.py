@@ -61,4 +61,4 @@ def check_files(source: Path, output: Path, machine: Machine,
                        sum(1 for t in src_tokens if t[0] == "line"), tuple(findings.estimation),
                        tuple(measures), structure, tuple(shown),
                        len(structural) + sum(m.n_violations for m in measures),
-                       tuple(findings.notes))
+                       tuple(findings.notes), machine.limits.jerk_model)
