@@ -166,18 +166,8 @@ def machine_from_mapping(data: Any, where: str, places: Mapping[str, Location] |
                 raise exc.at(places.get(key, here)) from None
         elif key in REQUIRED_KEYS:
             raise ProfileError(f"missing key '{key}'", here)
-    jerk_model = data.get("jerk_model", "paper")
-    if jerk_model not in JERK_MODELS:
-        raise ProfileError(f"'jerk_model' must be one of {', '.join(JERK_MODELS)}, not "
-                           f"{_shown(jerk_model)}", places.get("jerk_model", here))
-    if (overrides or {}).get("jerk_model") is not None:
-        jerk_model = overrides["jerk_model"]  # type: ignore[index]
-    planner = data.get("planner", "scurve")
-    if planner not in PLANNERS:
-        raise ProfileError(f"'planner' must be one of {', '.join(PLANNERS)}, not "
-                           f"{_shown(planner)}", places.get("planner", here))
-    if (overrides or {}).get("planner") is not None:
-        planner = overrides["planner"]  # type: ignore[index]
+    jerk_model = _choice(data, "jerk_model", JERK_MODELS, places, overrides, here)
+    planner = _choice(data, "planner", PLANNERS, places, overrides, here)
     for key, value in (overrides or {}).items():
         if key in ("jerk_model", "planner"):
             continue
@@ -227,6 +217,18 @@ def machine_from_mapping(data: Any, where: str, places: Mapping[str, Location] |
     if "decimals" not in values:
         values["decimals"] = auto_decimals(limits, limits.period_s / move_periods)
     return Machine(limits, **values)  # type: ignore[arg-type]
+
+
+def _choice(data: dict, key: str, choices: tuple[str, ...], places: Mapping[str, Location],
+            overrides: Mapping[str, Any] | None, here: Location) -> str:
+    """A key that names one of `choices` (the first by default); the option's value, if given,
+    wins (click has checked it)."""
+    value = data.get(key, choices[0])
+    if value not in choices:
+        raise ProfileError(f"'{key}' must be one of {', '.join(choices)}, not {_shown(value)}",
+                           places.get(key, here))
+    given = (overrides or {}).get(key)
+    return str(given) if given is not None else str(value)
 
 
 def _xyz(values: list[float]) -> tuple[float, float, float]:

@@ -36,6 +36,7 @@ from tests.test_path_model import (
     PATH_PROFILE,
     _profile_file,
     _worst_over_limits,
+    assert_keeps_every_path_limit,
 )
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -179,12 +180,7 @@ def test_random_curves_keep_every_limit_and_never_lose_to_the_scurve_planner(
     assume(scurve.grid.u.size <= OPTIMAL_NODES)
     plan = plan_curve(curve, lim)
     assert plan.cycle_time_s <= scurve.cycle_time_s
-    result = interpolate(plan, "rk2c")
-    assert np.isfinite(result.points).all()
-    if len(result.points) >= 4:
-        worst = _worst_over_limits(result.points, result.period_s, lim)
-        assert max(worst.values()) <= FROM_POSITIONS, worst
-    MotionGuard(lim, curve.name).check(result.points)
+    assert_keeps_every_path_limit(interpolate(plan, "rk2c"), lim, curve.name)
 
 
 def test_check_passes_an_optimal_program_that_lets_j_follow_kappa2_v3(tmp_path: Path) -> None:

@@ -298,12 +298,17 @@ def test_random_curves_keep_every_path_limit_at_a_sane_cycle(curve: NurbsCurve,
     plan = plan_curve(curve, lim)
     assert plan.cycle_time_s <= 3.0 * paper.cycle_time_s, (plan.cycle_time_s, paper.cycle_time_s)
     assume(plan.n_periods < 40_000)  # keep the example fast; long plans are no different
-    result = interpolate(plan, "rk2c")
+    assert_keeps_every_path_limit(interpolate(plan, "rk2c"), lim, curve.name)
+
+
+def assert_keeps_every_path_limit(result, lim, name: str) -> None:
+    """The interpolation's points finite, every path-model quantity from them within
+    FROM_POSITIONS of its limit, and the motion guard lets them pass."""
     assert np.isfinite(result.points).all()
     if len(result.points) >= 4:
         worst = _worst_over_limits(result.points, result.period_s, lim)
         assert max(worst.values()) <= FROM_POSITIONS, worst
-    MotionGuard(lim, curve.name).check(result.points)
+    MotionGuard(lim, name).check(result.points)
 
 
 def test_a_curve_too_slow_for_an_axis_is_refused_by_a_lower_bound_before_planning() -> None:
