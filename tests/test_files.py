@@ -267,12 +267,19 @@ def long_program(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
+def _default_signals() -> None:
+    """The signals the tests send at their default disposition in the child, however the tests
+    run: in the background SIGINT is ignored, under nohup SIGHUP (the child inherits it, and
+    keeps ignoring it as nohup means)."""
+    for signum in (signal.SIGINT, signal.SIGHUP, signal.SIGTERM):
+        signal.signal(signum, signal.SIG_DFL)
+
+
 def start_and_signal(args: list[str], folder: Path, signum: int, parts: int = 1) -> tuple[
         int, str]:
     """Run the CLI, wait until `parts` temporary outputs exist in `folder`, send `signum`."""
     proc = subprocess.Popen(CLI + args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            text=True,  # a default SIGINT, even if the test runs in background
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+                            text=True, preexec_fn=_default_signals)
     deadline = time.monotonic() + 60
     while sum(name.endswith(".part") for name in os.listdir(folder)) < parts:
         assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read()
