@@ -64,7 +64,7 @@ import numpy as np
 from nurbsfeed.geometry.nurbs import NurbsCurve
 from nurbsfeed.planning.grid import Grid
 from nurbsfeed.planning.limits import Limits, speed_limit
-from nurbsfeed.planning.path_model import Frames, frames, kappa_n_jumps
+from nurbsfeed.planning.path_model import Frames, frames, jump_speeds, kappa_n_jumps
 from nurbsfeed.planning.timelaw import TimeLaw
 
 REFINE_PERIODS = 4.0  # a cell lasting longer than this many periods is split
@@ -89,11 +89,15 @@ _POINT_X = (0.0, 0.5, 1.0)  # where a Hermite cell is constrained, as a share of
 _REST_Y = (0.5, 1.0)  # where a rest cell is, as a share of the distance from its rest
 
 
+def _hermite_basis(x: np.ndarray | float) -> np.ndarray:
+    """The cubic Hermite basis (h00, h10, h01, h11) at x in [0, 1]: (4,) or (4, N)."""
+    return np.array([2 * x**3 - 3 * x**2 + 1, x**3 - 2 * x**2 + x, -2 * x**3 + 3 * x**2,
+                     x**3 - x**2])
+
+
 def _hermite(x: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The cubic Hermite basis (h00, h10, h01, h11) at x in [0, 1] and its first and second
-    derivatives in x: three (4,) arrays."""
-    return (np.array([2 * x**3 - 3 * x**2 + 1, x**3 - 2 * x**2 + x, -2 * x**3 + 3 * x**2,
-                      x**3 - x**2]),
+    """`_hermite_basis` at x and its first and second derivatives in x: three (4,) arrays."""
+    return (_hermite_basis(x),
             np.array([6 * x**2 - 6 * x, 3 * x**2 - 4 * x + 1, -6 * x**2 + 6 * x,
                       3 * x**2 - 2 * x]),
             np.array([12 * x - 6, 6 * x - 4, -12 * x + 6, 6 * x - 2]))
@@ -262,21 +266,13 @@ def _jumps(curve: NurbsCurve, u: np.ndarray) -> np.ndarray:
 
 def _caps(lim: Limits, f: Frames, jumps: np.ndarray, feed_mm_s: np.ndarray) -> np.ndarray:
     """The speed limit (P,): `limits.speed_limit`, each axis's velocity and, where kappa N jumps
-    by D, the speed at which v^2 |D| / T keeps J_n and each axis's jerk (`path_model.
-    jump_limits`)."""
-    cap = speed_limit(f.kappa, lim, feed_mm_s)
-    period = lim.period_s
+    by D, `path_model.jump_speeds`."""
+    cap = np.minimum(speed_limit(f.kappa, lim, feed_mm_s), jump_speeds(jumps, lim))
     with np.errstate(divide="ignore"):
         for x in range(3):
             tx = np.abs(f.tangent[:, x])
             cap = np.minimum(cap, np.where(tx > 0.0, lim.axis_vel_mm_s[x]
                                            / np.where(tx > 0.0, tx, 1.0), np.inf))
-            d = np.abs(jumps[:, x])
-            cap = np.minimum(cap, np.where(d > 0.0, np.sqrt(lim.axis_jerk_mm_s3[x] * period
-                                                            / np.where(d > 0.0, d, 1.0)), np.inf))
-        size = np.linalg.norm(jumps, axis=1)
-        cap = np.minimum(cap, np.where(size > 0.0, np.sqrt(
-            lim.normal_jerk_mm_s3 * period / np.where(size > 0.0, size, 1.0)), np.inf))
     return cap
 
 
@@ -404,8 +400,8 @@ def _hermite_b(nodes: _Nodes, b: np.ndarray, d: np.ndarray, cell: np.ndarray,
                x: np.ndarray) -> np.ndarray:
     """b inside Hermite cells (N,) at shares x (N,) of their lengths."""
     h = nodes.h_mm[cell]
-    return ((2 * x**3 - 3 * x**2 + 1) * b[cell] + (x**3 - 2 * x**2 + x) * h * d[cell]
-            + (-2 * x**3 + 3 * x**2) * b[cell + 1] + (x**3 - x**2) * h * d[cell + 1])
+    h00, h10, h01, h11 = _hermite_basis(x)
+    return h00 * b[cell] + h10 * h * d[cell] + h01 * b[cell + 1] + h11 * h * d[cell + 1]
 
 
 def _cell_times(nodes: _Nodes, b: np.ndarray, d: np.ndarray) -> np.ndarray:
@@ -542,7 +538,6 @@ class Schedule:
     slowdown: float
     rounds: int
     rest_nodes: np.ndarray  # (K,) the grid nodes it rests at, one per key time of the law
-    nodes: int
 
 
 def optimal_schedule(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.ndarray,
@@ -601,4 +596,4 @@ def optimal_schedule(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.
     law = schedule_law(nodes, b, lim.period_s, excess)
     if not np.all(np.isfinite(law.jerk_mm_s3)) or not math.isfinite(law.duration_s):
         return None
-    return Schedule(law, excess, rounds, rest_nodes, int(nodes.s_mm.size))
+    return Schedule(law, excess, rounds, rest_nodes)

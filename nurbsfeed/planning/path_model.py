@@ -182,10 +182,14 @@ def kappa_n_jumps(curve: NurbsCurve, u_breaks: np.ndarray, zero_speed: float = 0
 
 def jump_limits(curve: NurbsCurve, u_breaks: np.ndarray, lim: Limits,
                 zero_speed: float = 0.0) -> np.ndarray:
-    """At interior knots u_breaks (K,): the speed at which the jump D of kappa N there
-    (`kappa_n_jumps`), read over one period as v^2 |D| / T, keeps J_n and every axis's jerk
-    (inf where kappa N does not jump)."""
-    jump = kappa_n_jumps(curve, u_breaks, zero_speed)
+    """At interior knots u_breaks (K,): `jump_speeds` of the jumps of kappa N there
+    (`kappa_n_jumps`)."""
+    return jump_speeds(kappa_n_jumps(curve, u_breaks, zero_speed), lim)
+
+
+def jump_speeds(jump: np.ndarray, lim: Limits) -> np.ndarray:
+    """The speed (K,) at which jumps D (K, 3) of kappa N, read over one period as v^2 |D| / T,
+    keep J_n and every axis's jerk (inf where D = 0)."""
     t = lim.period_s
     with np.errstate(divide="ignore"):
         size = np.sqrt(_dot(jump, jump))
