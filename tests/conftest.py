@@ -6,9 +6,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from nurbsfeed.geometry import NurbsCurve
-from nurbsfeed.machine import load_machine
+from nurbsfeed.machine import AXIS_KEYS, Machine, load_machine, machine_from_mapping
 from nurbsfeed.planning.limits import Limits
 from nurbsfeed.planning.timelaw import TimeLaw, chain_segments, speed_at_arc
 
@@ -36,6 +37,22 @@ def load_curve(name: str, folder: Path = SAMPLES) -> NurbsCurve:
     raw = json.loads((folder / f"{name}.json").read_text())["curves"][0]
     return NurbsCurve.build(raw["degree"], raw["knots"], raw["control_points"],
                             raw.get("weights"), raw.get("name", name))
+
+
+def default_paper_profile() -> dict[str, object]:
+    """configs/default.yaml without its jerk_model and per-axis keys: its path limits (200 mm/s,
+    2000 mm/s^2, 50,000 mm/s^3, 1 ms) under the paper's jerk model, the default profile as it
+    was before it moved to the path model (the paper model's tests are written for it)."""
+    values = yaml.safe_load((ROOT / "configs" / "default.yaml").read_text())
+    return {k: v for k, v in values.items() if k != "jerk_model" and k not in AXIS_KEYS}
+
+
+def default_paper_machine() -> Machine:
+    return machine_from_mapping(default_paper_profile(), "default-paper")
+
+
+def default_paper_limits() -> Limits:
+    return default_paper_machine().limits
 
 
 @pytest.fixture(scope="session")

@@ -161,9 +161,14 @@ def test_check_passes_on_correct_conversions(converted, name: str, profile: str)
     assert report.ok, "\n".join(map(str, report.violations))
     measured = {m.name: m for m in report.measures}
     assert set(measured) == set(CHECKS)
+    model_checks = (("tangential-jerk", "normal-jerk") if report.jerk_model == "paper" else
+                    ("tangential-jerk-xyz", "normal-jerk-xyz",
+                     *(f"{kind}-{axis}" for kind in ("axis-vel", "axis-acc", "axis-jerk")
+                       for axis in "xyz")))
+    assert report.jerk_model == ("path" if profile == "default" else "paper")
     for check in ("path-deviation", "chord-error", "coverage", "segment-time", "feed",
-                  "tangential-acc", "tangential-jerk", "normal-acc", "normal-jerk", "acc-xyz",
-                  "tangential-acc-xyz", "normal-acc-xyz"):
+                  "tangential-acc", "normal-acc", "acc-xyz", "tangential-acc-xyz",
+                  "normal-acc-xyz", *model_checks):
         assert measured[check].n_checked > 0.99 * report.n_moves and measured[check].ratio <= 1
     assert measured["feed"].worst > 0.5 * measured["feed"].limit  # real speeds, not zeros
 

@@ -27,6 +27,7 @@ from nurbsfeed.machine import load_machine
 from nurbsfeed.pipeline import convert_file
 from nurbsfeed.program import CurveBlock
 from nurbsfeed.readers import read_program
+from tests.conftest import default_paper_machine
 
 CASES = Path(__file__).parent / "data" / "check-corners"
 INCH = CASES / "inch-path-deviation.ngc"
@@ -151,7 +152,7 @@ def test_a_real_violation_beside_a_turn_back_is_still_caught(tmp_path: Path, bro
     13 moves around its tip removed, so the points jump back at speed) breaks the tangential
     jerk on the points before the cut."""
     source = TURNS / "hairpin-chord-error.ngc"
-    machine = load_machine("default")
+    machine = default_paper_machine()  # its tangential jerk row is the paper model's
     target = tmp_path / "out.nc"
     convert_file(source, target, machine)
     lines = target.read_text().splitlines(keepends=True)
@@ -233,7 +234,7 @@ def test_a_point_out_of_time_before_a_turn_back_corner_is_still_caught(tmp_path:
     """The point before the corner, moved 2e-5 in (5.1e-4 mm) back along the leg it is on, F
     words set so that each move still takes its period: the motion would cover 0.6 um in the
     last 1 ms before its rest, and measured on that leg the tangential jerk is broken."""
-    machine = load_machine("default")
+    machine = default_paper_machine()  # its tangential jerk row is the paper model's
     target = tmp_path / "out.nc"
     convert_file(TURN_BACK, target, machine)
     lines = target.read_text().splitlines(keepends=True)

@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from nurbsfeed.analysis import check_files
-from nurbsfeed.machine import load_machine
-from tests.conftest import SAMPLES, convert_each
+from nurbsfeed.machine import load_machine, machine_from_mapping
+from tests.conftest import SAMPLES, convert_each, default_paper_profile
 
 DATA = Path(__file__).parent / "data" / "check"
 
@@ -49,8 +49,10 @@ def violated(report) -> set[str]:
 
 
 def fixture_machine(**limits: float):
-    """The profile the fixtures were written with: the default, which then wrote 4 decimals."""
-    return load_machine("default", {"decimals": FIXTURE_DECIMALS, **limits})
+    """The profile the fixtures were written with: the default, which then wrote 4 decimals and
+    planned under the paper model."""
+    return machine_from_mapping({**default_paper_profile(), "decimals": FIXTURE_DECIMALS,
+                                 **limits}, "fixtures")
 
 
 def check(output: str, source: str, **limits: float):

@@ -241,9 +241,9 @@ def test_check_fails_a_paper_plan_under_path_limits(tmp_path: Path) -> None:
 def test_check_under_the_paper_model_shows_no_path_rows(tmp_path: Path) -> None:
     out = tmp_path / "out.nc"
     source = ROOT / "samples" / "butterfly.json"
-    machine = load_machine("default")
+    machine = load_machine("paper-table1")
     convert_file(source, out, machine)
-    table = render_check(check_files(source, out, machine), "default")
+    table = render_check(check_files(source, out, machine), "paper-table1")
     assert "normal jerk v^3 kappa^2" in table
     assert "jerk from positions" not in table and "X velocity" not in table
 

@@ -47,8 +47,9 @@ def model_for(key: str) -> dict[str, str]:
 def profile_with(tmp_path: Path, key: str, text: str) -> tuple[Path, int]:
     """The default profile with `key: text` in place of its own line (and `jerk_model: path`
     for a per-axis key); the file and that line."""
-    lines = [line for line in DEFAULT.splitlines() if not line.startswith(key + ":")]
-    lines += [f"{k}: {v}" for k, v in model_for(key).items()]
+    model = model_for(key)
+    lines = [line for line in DEFAULT.splitlines() if line.split(":")[0] not in {key, *model}]
+    lines += [f"{k}: {v}" for k, v in model.items()]
     path = tmp_path / "m.yaml"
     path.write_text("\n".join(lines + [f"{key}: {text}"]) + "\n")
     return path, len(lines) + 1

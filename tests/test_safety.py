@@ -11,30 +11,31 @@ import pytest
 from nurbsfeed.analysis.common import curve_blocks
 from nurbsfeed.errors import CurveError
 from nurbsfeed.interpolate import interpolate
-from nurbsfeed.machine import load_machine, machine_from_mapping
+from nurbsfeed.machine import machine_from_mapping
 from nurbsfeed.pipeline import plan_block
 from nurbsfeed.planning.planner import plan_curve
 from nurbsfeed.safety import GUARD_ACC_REL, GUARD_FEED_REL, GUARD_JERK_REL, MotionGuard
+from tests.conftest import default_paper_limits
 
-DEFAULT = load_machine("default").limits  # 200 mm/s, 2000 mm/s^2, 1 ms
+PAPER = default_paper_limits()  # no per-axis limits: the guard holds the path's alone
 SAMPLES = Path(__file__).resolve().parents[1] / "samples"
 
 
 def line(speed_mm_s: float, n: int, direction=(1.0, 0.0, 0.0)) -> np.ndarray:
     """n points at constant speed along a direction from the origin, one period apart."""
-    return np.arange(n)[:, None] * speed_mm_s * DEFAULT.period_s * np.asarray(direction)
+    return np.arange(n)[:, None] * speed_mm_s * PAPER.period_s * np.asarray(direction)
 
 
 def test_a_move_above_the_feed_cap_is_refused() -> None:
     # the issue's collapse: a 29.2 mm curve written as one move of one period
     with pytest.raises(CurveError, match=r"curve 0: refused, point 1 would move at 29212 mm/s"):
-        MotionGuard(DEFAULT, "curve 0").check(np.array([[0.0, 0, 0], [29.212, 0, 0]]))
+        MotionGuard(PAPER, "curve 0").check(np.array([[0.0, 0, 0], [29.212, 0, 0]]))
 
 
 def test_the_feed_cap_on_both_sides() -> None:
-    MotionGuard(DEFAULT, "c").check(line(200.0 * (1 + 0.9 * GUARD_FEED_REL), 50))
+    MotionGuard(PAPER, "c").check(line(200.0 * (1 + 0.9 * GUARD_FEED_REL), 50))
     with pytest.raises(CurveError, match="above the feed cap of 200 mm/s"):
-        MotionGuard(DEFAULT, "c").check(line(200.0 * (1 + 1.1 * GUARD_FEED_REL), 50))
+        MotionGuard(PAPER, "c").check(line(200.0 * (1 + 1.1 * GUARD_FEED_REL), 50))
 
 
 def test_a_corner_at_speed_is_refused_across_chunks() -> None:
@@ -42,7 +43,7 @@ def test_a_corner_at_speed_is_refused_across_chunks() -> None:
     # which falls on the boundary between two chunks
     first = line(100.0, 20)
     second = first[-1] + line(100.0, 21, (0.0, 1.0, 0.0))[1:]
-    guard = MotionGuard(DEFAULT, "curve 3")
+    guard = MotionGuard(PAPER, "curve 3")
     guard.check(first)
     with pytest.raises(CurveError, match=r"point 20 would accelerate at 141421 mm/s\^2"):
         guard.check(second)
@@ -50,12 +51,12 @@ def test_a_corner_at_speed_is_refused_across_chunks() -> None:
 
 def test_acceleration_bound_on_both_sides() -> None:
     # constant acceleration a along x: every second difference is a T^2
-    bound = np.hypot(DEFAULT.acc_mm_s2, DEFAULT.normal_acc_mm_s2) * (1 + GUARD_ACC_REL)
-    t = np.arange(30) * DEFAULT.period_s
+    bound = np.hypot(PAPER.acc_mm_s2, PAPER.normal_acc_mm_s2) * (1 + GUARD_ACC_REL)
+    t = np.arange(30) * PAPER.period_s
     for acc, ok in ((bound * 0.999, True), (bound * 1.001, False)):
         points = np.zeros((30, 3))
         points[:, 0] = 0.5 * acc * t**2
-        guard = MotionGuard(DEFAULT, "c")
+        guard = MotionGuard(PAPER, "c")
         if ok:
             guard.check(points)
         else:
@@ -66,7 +67,7 @@ def test_acceleration_bound_on_both_sides() -> None:
 def test_points_one_at_a_time_are_checked_like_a_chunk() -> None:
     first = line(100.0, 5)
     corner = first[-1] + np.array([0.0, 0.1, 0.0])
-    guard = MotionGuard(DEFAULT, "c")
+    guard = MotionGuard(PAPER, "c")
     for p in first:
         guard.check(p[None, :])
     with pytest.raises(CurveError, match="point 5 would accelerate"):
@@ -77,25 +78,25 @@ def test_a_nan_is_refused() -> None:
     points = line(10.0, 5)
     points[3, 1] = np.nan
     with pytest.raises(CurveError, match="point 3 is not a finite number"):
-        MotionGuard(DEFAULT, "c").check(points)
+        MotionGuard(PAPER, "c").check(points)
 
 
 def test_every_sample_curve_passes(butterfly, paper_limits) -> None:
-    for lim in (paper_limits, DEFAULT):
+    for lim in (paper_limits, PAPER):
         points = interpolate(plan_curve(butterfly, lim)).points
         MotionGuard(lim, "butterfly").check(points)
 
 
 # ---- the jerk model `path`: the motion's own jerk, and each axis -------------------------------
 
-PATH = dataclasses.replace(DEFAULT, jerk_model="path", axis_vel_mm_s=(150.0, 150.0, 50.0),
+PATH = dataclasses.replace(PAPER, jerk_model="path", axis_vel_mm_s=(150.0, 150.0, 50.0),
                            axis_acc_mm_s2=(1500.0, 1500.0, 800.0),
                            axis_jerk_mm_s3=(40000.0, 40000.0, 20000.0))
 
 
 def constant_jerk(jerk: np.ndarray, n: int) -> np.ndarray:
     """n points from rest at a constant jerk vector: every third difference is jerk T^3."""
-    t = np.arange(n) * DEFAULT.period_s
+    t = np.arange(n) * PAPER.period_s
     return t[:, None] ** 3 / 6.0 * np.asarray(jerk, dtype=float)[None, :]
 
 
@@ -115,7 +116,7 @@ def test_the_path_model_guards_jerk_on_both_sides(lim, jerk, limit: float) -> No
     MotionGuard(lim, "c").check(constant_jerk(direction * bound * 0.999, 12))
     with pytest.raises(CurveError, match=r"point 3 would jerk at"):
         MotionGuard(lim, "c").check(constant_jerk(direction * bound * 1.001, 12))
-    MotionGuard(DEFAULT, "c").check(constant_jerk(direction * bound * 1.001, 12))
+    MotionGuard(PAPER, "c").check(constant_jerk(direction * bound * 1.001, 12))
 
 
 def test_the_path_model_guards_each_axis_velocity_and_acceleration_across_chunks() -> None:
@@ -128,7 +129,7 @@ def test_the_path_model_guards_each_axis_velocity_and_acceleration_across_chunks
         MotionGuard(PATH, "curve 2").check(np.concatenate(
             [line(49.0, 7, (0.0, 0.0, 1.0)), line(49.0, 7, (0.0, 0.0, 1.0))[6] + line(
                 51.0, 3, (0.0, 0.0, 1.0))[1:]]))
-    t = np.arange(30) * DEFAULT.period_s
+    t = np.arange(30) * PAPER.period_s
     accelerating = np.zeros((30, 3))
     accelerating[:, 2] = 0.5 * 800.0 * (1 + GUARD_ACC_REL) * 1.001 * t**2
     guard = MotionGuard(dataclasses.replace(PATH, axis_jerk_mm_s3=(np.inf,) * 3), "c")

@@ -176,20 +176,21 @@ def test_a_curve_of_two_hours_converts_below_300_mb(tmp_path: Path) -> None:
 
 def test_a_curve_longer_than_max_curve_time_is_refused_without_output(tmp_path: Path) -> None:
     source = SAMPLES / "quarter-circle.json"
-    machine = load_machine("default", {"max_feed_mm_s": 1.0})
+    # the paper model: the path model refuses it earlier, on a lower bound ("cycle of at least")
+    machine = load_machine("paper-table1", {"max_feed_mm_s": 1.0})
     block = next(item for item in json_items(source) if isinstance(item, CurveBlock))
     plan = plan_block(block.in_mm(), machine)  # 15.7 s
     out = tmp_path / "q.nc"
-    code, stdout, stderr = run("convert", str(source), "--max-feed-mm-s", "1",
-                               "--max-curve-time-s", "10", "-o", str(out))
+    code, stdout, stderr = run("convert", str(source), "-m", "paper-table1", "--max-feed-mm-s",
+                               "1", "--max-curve-time-s", "10", "-o", str(out))
     assert (code, stdout) == (2, "")
     assert stderr == (f'{source}:2:44: curve 0 "quarter-circle-r10": planned cycle '
                       f"{plan.law.duration_s:.6g} s exceeds max_curve_time_s = 10 s (raise it "
                       "in the profile or with --max-curve-time-s)\n")
     assert not out.exists() and list(tmp_path.iterdir()) == []
     # both sides of the limit: the planned cycle itself passes, a hair less is refused
-    code, _, _ = run("convert", str(source), "--max-feed-mm-s", "1", "--max-curve-time-s",
-                     repr(plan.cycle_time_s), "-o", str(out))
+    code, _, _ = run("convert", str(source), "-m", "paper-table1", "--max-feed-mm-s", "1",
+                     "--max-curve-time-s", repr(plan.cycle_time_s), "-o", str(out))
     assert code == 0 and out.exists()
     with pytest.raises(CurveError, match=r"^planned cycle .* exceeds max_curve_time_s"):
         plan_curve(block.curve, plan.limits, block.feed_u, block.feed_mm_s,

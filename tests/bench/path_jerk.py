@@ -4,16 +4,17 @@
     python -m tests.bench.path_jerk --quick    # the short dense curves only
 
 Every curve of each file in samples/ and of tests/bench/dense_curves is planned under the
-`default` and `paper-table1` profiles, and each again under `jerk_model: path`, stepped with
-rk2c, and its interpolation points (full precision, one period apart) are differenced
-(tests/motion_from_positions): the motion a controller executing them produces, not the
-planner's own v, a, j. The first table sets each
+`default` profile (path model, per-axis limits) and again under the paper model with its path
+limits and no axis limits ("default paper"), and under `paper-table1` (paper model) and again
+under `jerk_model: path`, stepped with rk2c, and its interpolation points (full precision, one
+period apart) are differenced (tests/motion_from_positions): the motion a controller executing
+them produces, not the planner's own v, a, j. The first table sets each
 path quantity against the profile's limit for it: tangential acceleration and jerk against A_t
 and J_t, normal acceleration against A_n, the part of the jerk vector across the path against
 J_n (the planner limits the proxy v^3 kappa^2 instead), and the jerk vector's norm against
 sqrt(J_t^2 + J_n^2), what the two limits allow together. The second gives each axis's largest
-|velocity|, |acceleration| and |jerk|: these profiles set no per-axis limits (the path
-model's are tested in tests/test_path_model.py). A file of several
+|velocity|, |acceleration| and |jerk|, against the default's per-axis limits under it. A file of
+several
 curves shows the largest value over its curves and the sum of their cycle times. Measured
 here, never asserted.
 """
@@ -30,16 +31,17 @@ import numpy as np
 from nurbsfeed.analysis.common import curve_blocks
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.interpolate import interpolate
-from nurbsfeed.machine import Machine, load_machine
+from nurbsfeed.machine import Machine, load_machine, machine_from_mapping
 from nurbsfeed.pipeline import plan_block
 from nurbsfeed.planning.planner import Plan, plan_curve
 from tests.bench.dense_curves import dense_curves
+from tests.conftest import default_paper_profile
 from tests.motion_from_positions import path_motion
 
 ROOT = Path(__file__).resolve().parents[2]
-PROFILES = ("default", "paper-table1")
 # each profile again under the path jerk model (planning.path_model), named "<profile> path"
 PATH_MODEL = " path"
+PAPER_MODEL = " paper"  # the default's path limits under the paper model, without its axes
 
 
 @dataclass(frozen=True)
@@ -105,18 +107,25 @@ def path_row(name: str, profile: str, p: Peaks, machine: Machine) -> str:
                        _over(p.jerk_norm, math.hypot(lim.jerk_mm_s3, lim.normal_jerk_mm_s3))])
 
 
-def axis_row(name: str, profile: str, p: Peaks) -> str:
-    return " | ".join([name, profile, *(f"{v:.1f}" for v in p.axis_velocity),
-                       *(f"{a:,.0f}" for a in p.axis_acc), *(f"{j:,.0f}" for j in p.axis_jerk)])
+def axis_row(name: str, profile: str, p: Peaks, machine: Machine) -> str:
+    lim = machine.limits
+    cells = []
+    for values, limits, fmt in ((p.axis_velocity, lim.axis_vel_mm_s, "{:.1f}"),
+                                (p.axis_acc, lim.axis_acc_mm_s2, "{:,.0f}"),
+                                (p.axis_jerk, lim.axis_jerk_mm_s3, "{:,.0f}")):
+        cells += [_over(v, limit) if math.isfinite(limit) else fmt.format(v)
+                  for v, limit in zip(values, limits)]
+    return " | ".join([name, profile, *cells])
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="the short dense curves only")
     args = parser.parse_args()
-    machines = {name: load_machine(name) for name in PROFILES}
-    machines |= {name + PATH_MODEL: load_machine(name, {"jerk_model": "path"})
-                 for name in PROFILES}
+    machines = {"default": load_machine("default"),
+                "default" + PAPER_MODEL: machine_from_mapping(default_paper_profile(), "default"),
+                "paper-table1": load_machine("paper-table1"),
+                "paper-table1" + PATH_MODEL: load_machine("paper-table1", {"jerk_model": "path"})}
     rows: list[tuple[str, str, Peaks]] = []
     if not args.quick:
         for path in sorted((ROOT / "samples").iterdir()):
@@ -134,12 +143,13 @@ def main() -> None:
     print("|---|---|---:|---:|---:|---:|---:|---:|")
     for name, profile, found in rows:
         print(f"| {path_row(name, profile, found, machines[profile])} |")
-    print("\nAxes: largest |velocity| mm/s, |acceleration| mm/s², |jerk| mm/s³ (the "
-          "profiles set no per-axis limits).\n")
+    print("\nAxes: largest |velocity| mm/s, |acceleration| mm/s², |jerk| mm/s³, with "
+          "(measured / limit) where the profile limits the axis (the default's per-axis "
+          "limits).\n")
     print("| curve | profile | vX | vY | vZ | aX | aY | aZ | jX | jY | jZ |")
     print("|---|---|" + "---:|" * 9)
     for name, profile, found in rows:
-        print(f"| {axis_row(name, profile, found)} |")
+        print(f"| {axis_row(name, profile, found, machines[profile])} |")
 
 
 if __name__ == "__main__":
