@@ -90,6 +90,31 @@ def test_a_rest_cell_is_constant_jerk_from_rest() -> None:
     assert j[0] > 0.0 and j[1] == pytest.approx(j[0], rel=1e-9)
 
 
+@pytest.mark.parametrize("outcome", ["stops-inside-a-cell", "program-fails"])
+def test_a_schedule_that_never_arrives_or_a_failed_program_keeps_the_scurve_plan(
+        monkeypatch: pytest.MonkeyPatch, outcome: str) -> None:
+    """Random test find (not pinned: drawn before the node filter existed): a program left
+    b = 0 at a node inside a stretch, a motion that stops there and never arrives (cycle inf),
+    and planning raised. Either that or a failed program must leave the S-curve plan, exactly."""
+    line = NurbsCurve.build(1, [0, 0, 1, 1], [[0, 0, 0], [50.0, 0, 0]])
+    lim = _limits(OPTIMAL_PATH_ONLY)
+    scurve = plan_curve(line, dataclasses.replace(lim, planner="scurve"))
+    real_improve = optimal._Problem.improve
+
+    def improve(self, b):
+        if outcome == "program-fails":
+            return None
+        out = real_improve(self, b)
+        out[np.flatnonzero(~self.nodes.rest)[out.size // 4]] = 0.0
+        return out
+
+    monkeypatch.setattr(optimal._Problem, "improve", improve)
+    plan = plan_curve(line, lim)
+    assert plan.planner == "scurve"
+    assert plan.cycle_time_s == scurve.cycle_time_s
+    assert np.array_equal(plan.law.jerk_mm_s3, scurve.law.jerk_mm_s3)
+
+
 # ---- cycle time -------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("length_mm", [0.5, 5.0, 50.0, 300.0])

@@ -21,11 +21,13 @@ The limit on that is a speed limit at the knot, `jump_limits`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from nurbsfeed.geometry.nurbs import NurbsCurve
+from nurbsfeed.jit import jit
 from nurbsfeed.planning.limits import Limits
 
 # The S-curve's own acceleration and jerk, as a share of the lowest limit they add to: the
@@ -64,27 +66,48 @@ def frames(curve: NurbsCurve, u: np.ndarray) -> Frames:
     b' is 0 too, N and B are 0 (no jerk term can point there). Where C' = 0 (a stop: the motion
     rests) everything is 0."""
     c1, c2, c3 = curve.derivatives3(np.ascontiguousarray(u, dtype=float))
-    speed = np.sqrt(_dot(c1, c1))
-    moving = speed > 0.0
-    safe_speed = np.where(moving, speed, 1.0)
-    tangent = c1 / safe_speed[:, None] * moving[:, None]
-    b = np.cross(c1, c2)
-    b1 = np.cross(c1, c3)
-    nb = np.sqrt(_dot(b, b))
-    nb1 = np.sqrt(_dot(b1, b1))
-    bent = moving & (nb > STRAIGHT_REL * speed * np.sqrt(_dot(c2, c2)))
-    safe_nb = np.where(bent, nb, 1.0)
-    kappa = np.where(bent, nb / safe_speed**3, 0.0)
-    dk_du = np.where(bent, _dot(b, b1) / (safe_nb * safe_speed**3)
-                     - 3.0 * nb * _dot(c1, c2) / safe_speed**5,
-                     nb1 / safe_speed**3)
-    dkappa_ds = np.where(moving, dk_du / safe_speed, 0.0)
-    torsion = np.where(bent, _dot(b, c3) / safe_nb**2, 0.0)
-    straight_dir = np.where((nb1 > 0.0)[:, None], b1 / np.where(nb1 > 0.0, nb1, 1.0)[:, None],
-                            0.0)
-    binormal = np.where(bent[:, None], b / safe_nb[:, None], straight_dir) * moving[:, None]
-    normal = np.cross(binormal, tangent)
-    return Frames(kappa, dkappa_ds, torsion, tangent, normal, binormal)
+    scalars = np.zeros((3, c1.shape[0]))
+    vectors = np.zeros((3, c1.shape[0], 3))
+    _frame_kernel(np.ascontiguousarray(c1), np.ascontiguousarray(c2), np.ascontiguousarray(c3),
+                  STRAIGHT_REL, scalars, vectors)
+    return Frames(scalars[0], scalars[1], scalars[2], vectors[0], vectors[1], vectors[2])
+
+
+@jit
+def _frame_kernel(c1: np.ndarray, c2: np.ndarray, c3: np.ndarray, straight_rel: float,
+                  scalars: np.ndarray, vectors: np.ndarray) -> None:
+    """`frames` point by point, into scalars (3, M): kappa, dkappa/ds, tau, and vectors
+    (3, M, 3): T, N, B; all left 0 where C' = 0."""
+    for i in range(c1.shape[0]):
+        x1, y1, z1 = c1[i, 0], c1[i, 1], c1[i, 2]
+        x2, y2, z2 = c2[i, 0], c2[i, 1], c2[i, 2]
+        x3, y3, z3 = c3[i, 0], c3[i, 1], c3[i, 2]
+        speed = math.sqrt(x1 * x1 + y1 * y1 + z1 * z1)
+        if not speed > 0.0:
+            continue
+        bx, by, bz = y1 * z2 - z1 * y2, z1 * x2 - x1 * z2, x1 * y2 - y1 * x2  # b
+        ex, ey, ez = y1 * z3 - z1 * y3, z1 * x3 - x1 * z3, x1 * y3 - y1 * x3  # b'
+        nb = math.sqrt(bx * bx + by * by + bz * bz)
+        ne = math.sqrt(ex * ex + ey * ey + ez * ez)
+        speed3 = speed**3
+        tx, ty, tz = x1 / speed, y1 / speed, z1 / speed
+        if nb > straight_rel * speed * math.sqrt(x2 * x2 + y2 * y2 + z2 * z2):
+            scalars[0, i] = nb / speed3
+            dk_du = ((bx * ex + by * ey + bz * ez) / (nb * speed3)
+                     - 3.0 * nb * (x1 * x2 + y1 * y2 + z1 * z2) / speed**5)
+            scalars[2, i] = (bx * x3 + by * y3 + bz * z3) / nb**2
+            ux, uy, uz = bx / nb, by / nb, bz / nb
+        else:
+            dk_du = ne / speed3
+            ux, uy, uz = 0.0, 0.0, 0.0
+            if ne > 0.0:
+                ux, uy, uz = ex / ne, ey / ne, ez / ne
+        scalars[1, i] = dk_du / speed
+        vectors[0, i, 0], vectors[0, i, 1], vectors[0, i, 2] = tx, ty, tz
+        vectors[1, i, 0] = uy * tz - uz * ty  # N = B x T
+        vectors[1, i, 1] = uz * tx - ux * tz
+        vectors[1, i, 2] = ux * ty - uy * tx
+        vectors[2, i, 0], vectors[2, i, 1], vectors[2, i, 2] = ux, uy, uz
 
 
 def scurve_limits(lim: Limits, moving_axes: np.ndarray) -> tuple[float, float]:
@@ -132,22 +155,47 @@ def motion_ratio(f: Frames, v: np.ndarray, a: np.ndarray, j: np.ndarray,
                  lim: Limits) -> np.ndarray:
     """Per point (M,): the least lambda >= 0 such that the motion slowed by lambda keeps every
     path-model limit there (<= 1: it holds as it is)."""
-    k = f.kappa
-    jt = j - k * k * v**3
-    jn = 3.0 * k * v * a + f.dkappa_ds * v**3
-    jb = k * f.torsion * v**3
-    ratio = np.maximum(np.sqrt(np.abs(a) / lim.acc_mm_s2),
-                       np.sqrt(k * v * v / lim.normal_acc_mm_s2))
-    ratio = np.maximum(ratio, np.cbrt(np.abs(jt) / lim.jerk_mm_s3))
-    ratio = np.maximum(ratio, np.cbrt(np.hypot(jn, jb) / lim.normal_jerk_mm_s3))
-    for x in range(3):
-        t_x, n_x, b_x = f.tangent[:, x], f.normal[:, x], f.binormal[:, x]
-        ratio = np.maximum(ratio, np.abs(v * t_x) / lim.axis_vel_mm_s[x])
-        ratio = np.maximum(ratio, np.sqrt(np.abs(a * t_x + k * v * v * n_x)
-                                          / lim.axis_acc_mm_s2[x]))
-        ratio = np.maximum(ratio, np.cbrt(np.abs(jt * t_x + jn * n_x + jb * b_x)
-                                          / lim.axis_jerk_mm_s3[x]))
-    return ratio
+    out = np.empty(f.kappa.size)
+    flat = np.ascontiguousarray
+    _ratio_kernel(f.kappa, f.dkappa_ds, f.torsion, f.tangent, f.normal, f.binormal,
+                  flat(v, dtype=float), flat(a, dtype=float), flat(j, dtype=float),
+                  lim.acc_mm_s2, lim.normal_acc_mm_s2, lim.jerk_mm_s3, lim.normal_jerk_mm_s3,
+                  np.array(lim.axis_vel_mm_s, dtype=float),
+                  np.array(lim.axis_acc_mm_s2, dtype=float),
+                  np.array(lim.axis_jerk_mm_s3, dtype=float), out)
+    return out
+
+
+@jit
+def _most(r: float, x: float) -> float:
+    """The larger of r and x, NaN if either is (as np.maximum)."""
+    return x if (x > r or x != x) else r
+
+
+@jit
+def _ratio_kernel(kappa: np.ndarray, dkappa_ds: np.ndarray, torsion: np.ndarray,
+                  tangent: np.ndarray, normal: np.ndarray, binormal: np.ndarray, v: np.ndarray,
+                  a: np.ndarray, j: np.ndarray, acc: float, normal_acc: float, jerk: float,
+                  normal_jerk: float, axis_vel: np.ndarray, axis_acc: np.ndarray,
+                  axis_jerk: np.ndarray, out: np.ndarray) -> None:
+    """`motion_ratio` point by point into out (M,): the largest share of each kind first (a
+    velocity's ratio is its share, an acceleration's the square root of it, a jerk's the cube
+    root), then one root of each."""
+    for i in range(out.size):
+        k, vi, ai = kappa[i], v[i], a[i]
+        v3 = vi**3
+        jt = j[i] - k * k * v3
+        jn = 3.0 * k * vi * ai + dkappa_ds[i] * v3
+        jb = k * torsion[i] * v3
+        vel = 0.0
+        accel = _most(abs(ai) / acc, k * vi * vi / normal_acc)
+        jolt = _most(abs(jt) / jerk, math.hypot(jn, jb) / normal_jerk)
+        for x in range(3):
+            t_x, n_x, b_x = tangent[i, x], normal[i, x], binormal[i, x]
+            vel = _most(vel, abs(vi * t_x) / axis_vel[x])
+            accel = _most(accel, abs(ai * t_x + k * vi * vi * n_x) / axis_acc[x])
+            jolt = _most(jolt, abs(jt * t_x + jn * n_x + jb * b_x) / axis_jerk[x])
+        out[i] = _most(_most(vel, math.sqrt(accel)), np.cbrt(jolt))
 
 
 def kappa_n_jumps(curve: NurbsCurve, u_breaks: np.ndarray, zero_speed: float = 0.0

@@ -2,6 +2,7 @@
 
     python -m tests.bench.linuxcnc                         # every sample, 1000 and 5000 mm/s²
     python -m tests.bench.linuxcnc butterfly.json --acc 1000 --output default,decimals=6
+    python -m tests.bench.linuxcnc butterfly.json --output default,planner=optimal
     python -m tests.bench.linuxcnc quarter-circle.json --traj ARC_BLEND_RAMP_FREQ=1000
 
 Each sample is converted with an output variant: a built-in profile (the linuxcnc profile when
@@ -39,17 +40,20 @@ from tests.linuxcnc.run_sim import (
 DEFAULT_OUTPUTS = (LINUXCNC_PROFILE, "default")
 
 
-def output_variant(spec: str) -> tuple[str, dict[str, float | int]]:
-    """'default,decimals=6,period_s=0.002' -> ('default', {'decimals': 6, 'period_s': 0.002}):
-    an item without '=' names the profile (linuxcnc when none does), the others override it."""
+def output_variant(spec: str) -> tuple[str, dict[str, float | int | str]]:
+    """'default,decimals=6,planner=optimal' -> ('default', {'decimals': 6, 'planner':
+    'optimal'}): an item without '=' names the profile (linuxcnc when none does), the others
+    override it (jerk_model and planner by name, the rest numbers)."""
     profile = LINUXCNC_PROFILE
-    overrides: dict[str, float | int] = {}
+    overrides: dict[str, float | int | str] = {}
     for item in filter(None, spec.split(",")):
         key, equals, value = item.partition("=")
         if not equals:
             profile = key
-            continue
-        overrides[key] = int(value) if key in INT_KEYS else float(value)
+        elif key in ("jerk_model", "planner"):
+            overrides[key] = value
+        else:
+            overrides[key] = int(value) if key in INT_KEYS else float(value)
     return profile, overrides
 
 

@@ -6,10 +6,11 @@
 1. Stepping kernels: microseconds per step for each method on the butterfly with paper-table1
    (the compiled kernel alone, median of repeated runs after a warm-up).
 2. End to end: `nurbsfeed convert` on generated Fanuc G06.2 programs of hundreds of butterfly-sized
-   curves (tests/bench/programs.py), pinned to one core, after a warm-up conversion that fills
-   the numba cache; output points per second (start-up, reading, planning, interpolation and
-   writing included) of the median of END_TO_END_RUNS runs with the range over all of them, its
-   wall time, and the highest peak RSS of the children,
+   curves (tests/bench/programs.py) under the default profile, and the larger one again under
+   its limits with the paper model (what the path model's planning costs), pinned to one core,
+   after a warm-up conversion that fills the numba cache; output points per second (start-up,
+   reading, planning, interpolation and writing included) of the median of END_TO_END_RUNS runs
+   with the range over all of them, its wall time, and the highest peak RSS of the children,
    for two program sizes (memory must not grow with the output).
 3. Reading: `nurbsfeed convert` of a program of PASS_THROUGH_MB MB of lines it passes through
    and 3 curves (tests/bench/programs.py), once: its wall time and peak RSS, which must not grow
@@ -31,13 +32,14 @@ import time
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from nurbsfeed.interpolate import METHODS, SLOW_SPEED_REL, step_spans
 from nurbsfeed.machine import load_machine
 from nurbsfeed.planning.planner import plan_curve
 from nurbsfeed.readers.json_curves import read_json_curves
 from tests.bench.programs import fanuc_program, write_pass_through_program
-from tests.conftest import law_increments
+from tests.conftest import default_paper_profile, law_increments
 
 ROOT = Path(__file__).resolve().parents[2]
 REPEATS = 30
@@ -94,14 +96,16 @@ def run_convert(args: list[str]) -> tuple[float, int]:
     return wall, usage.ru_maxrss
 
 
-def end_to_end(n_curves: int, folder: Path) -> dict[str, float]:
-    """END_TO_END_RUNS conversions of an n-curve program (numba cache warm): the median run,
-    and the points per second of the slowest and the fastest."""
+def end_to_end(n_curves: int, folder: Path, profile: Path | None = None) -> dict[str, float]:
+    """END_TO_END_RUNS conversions of an n-curve program (numba cache warm) under the default
+    profile or the one given: the median run, and the points per second of the slowest and the
+    fastest."""
     src = folder / f"program-{n_curves}.nc"
     src.write_text(fanuc_program(n_curves))
     out = folder / f"out-{n_curves}.nc"
-    runs = sorted((run_convert([str(src), "-o", str(out), "-q"]) for _ in range(END_TO_END_RUNS)),
-                  key=lambda run: run[0])
+    machine = ["-m", str(profile)] if profile else []
+    runs = sorted((run_convert([str(src), "-o", str(out), "-q", *machine])
+                   for _ in range(END_TO_END_RUNS)), key=lambda run: run[0])
     wall, rss_kib = runs[len(runs) // 2]
     points = 0
     with out.open() as handle:
@@ -111,6 +115,7 @@ def end_to_end(n_curves: int, folder: Path) -> dict[str, float]:
     out_mb = out.stat().st_size / 1e6
     out.unlink()
     return {"curves": n_curves, "points": points, "wall_s": wall, "points_per_s": points / wall,
+            "model": " under the paper model" if profile else "",
             "slowest": points / runs[-1][0], "fastest": points / runs[0][0],
             "rss_mb": max(run[1] for run in runs) / 1024, "output_mb": out_mb}
 
@@ -151,6 +156,11 @@ def main() -> None:
         folder = Path(tmp)
         warm_up(folder)
         runs = [end_to_end(n, folder) for n in sizes]
+        # the default's limits under the paper model (the default profile before it moved to
+        # the path model): what planning the path model costs
+        paper = folder / "default-paper.yaml"
+        paper.write_text(yaml.safe_dump(default_paper_profile()))
+        runs.append(end_to_end(sizes[-1], folder, paper))
         reading = pass_through(PASS_THROUGH_MB // 10 if quick else PASS_THROUGH_MB, folder)
         cold = cold_start(folder)
     print("| benchmark | result |")
@@ -158,7 +168,7 @@ def main() -> None:
     for name, us in kernel.items():
         print(f"| kernel {name}, butterfly, paper-table1 | {us:.3f} us/step |")
     for r in runs:
-        print(f"| convert {r['curves']} curves, {r['points']:,} points "
+        print(f"| convert {r['curves']} curves{r['model']}, {r['points']:,} points "
               f"({r['output_mb']:.0f} MB out) | {r['points_per_s'] / 1e6:.2f} M points/s "
               f"({r['slowest'] / 1e6:.2f}-{r['fastest'] / 1e6:.2f} over {END_TO_END_RUNS} runs), "
               f"{r['wall_s']:.2f} s, peak RSS {r['rss_mb']:.0f} MB |")
