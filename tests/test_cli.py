@@ -283,13 +283,15 @@ def test_zero_length_curve_writes_no_move_and_says_so(tmp_path: Path) -> None:
     assert "G1" not in stdout
 
 
-def test_jit_and_plain_python_kernels_write_identical_programs(tmp_path: Path) -> None:
+@pytest.mark.parametrize("profile", ["paper-table1", "default"])  # paper model, path model
+def test_jit_and_plain_python_kernels_write_identical_programs(tmp_path: Path,
+                                                               profile: str) -> None:
     """One code path: the numba-compiled kernels and the same functions run as plain Python
     produce the same output to the last written digit (and the same trace)."""
     outputs = []
     for flag in ("0", "1"):
         out, trace = tmp_path / f"q{flag}.nc", tmp_path / f"q{flag}.csv"
-        args = ["convert", str(SAMPLES / "quarter-circle.json"), "-m", "paper-table1", "-o",
+        args = ["convert", str(SAMPLES / "quarter-circle.json"), "-m", profile, "-o",
                 str(out), "--trace", str(trace), "-q"]
         if flag == "0" and JIT_ENABLED:  # this process runs the compiled kernels already
             assert run(*args)[0] == 0
