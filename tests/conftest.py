@@ -47,8 +47,9 @@ def default_paper_profile() -> dict[str, object]:
     return {k: v for k, v in values.items() if k != "jerk_model" and k not in AXIS_KEYS}
 
 
-def default_paper_machine() -> Machine:
-    return machine_from_mapping(default_paper_profile(), "default-paper")
+def default_paper_machine(**overrides: object) -> Machine:
+    """`default_paper_profile` with `overrides` of its keys, as a machine."""
+    return machine_from_mapping({**default_paper_profile(), **overrides}, "default-paper")
 
 
 def default_paper_limits() -> Limits:

@@ -14,9 +14,9 @@ import pytest
 from nurbsfeed.analysis import check_files
 from nurbsfeed.analysis.check import project_points
 from nurbsfeed.geometry import NurbsCurve
-from nurbsfeed.machine import load_machine, machine_from_mapping
+from nurbsfeed.machine import load_machine
 from nurbsfeed.pipeline import convert_file
-from tests.conftest import convert_each, default_paper_profile
+from tests.conftest import convert_each, default_paper_machine
 
 DEGENERATE = Path(__file__).parent / "data" / "degenerate"
 CORNER = DEGENERATE / "corner-tripled-point.json"
@@ -66,7 +66,7 @@ def test_a_point_moved_off_the_curve_right_after_a_corner_fails(tmp_path: Path) 
     """The first point after the corner, Y0.0001 on the line X20, moved to X20.0003 (3.5 r off
     the curve, which never passes x = 20): path-deviation at that line and no other."""
     # (the paper model: its first moves from the corner are the ones this was written for)
-    machine = machine_from_mapping({**default_paper_profile(), "decimals": DECIMALS}, "paper")
+    machine = default_paper_machine(decimals=DECIMALS)
     good = tmp_path / "corner.nc"
     convert_file(CORNER, good, machine)
     assert check_files(CORNER, good, machine).ok

@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from nurbsfeed.analysis import check_files
-from nurbsfeed.machine import load_machine, machine_from_mapping
-from tests.conftest import SAMPLES, convert_each, default_paper_profile
+from nurbsfeed.machine import load_machine
+from tests.conftest import SAMPLES, convert_each, default_paper_machine
 
 DATA = Path(__file__).parent / "data" / "check"
 
@@ -51,8 +51,7 @@ def violated(report) -> set[str]:
 def fixture_machine(**limits: float):
     """The profile the fixtures were written with: the default, which then wrote 4 decimals and
     planned under the paper model."""
-    return machine_from_mapping({**default_paper_profile(), "decimals": FIXTURE_DECIMALS,
-                                 **limits}, "fixtures")
+    return default_paper_machine(decimals=FIXTURE_DECIMALS, **limits)
 
 
 def check(output: str, source: str, **limits: float):

@@ -31,11 +31,11 @@ import numpy as np
 from nurbsfeed.analysis.common import curve_blocks
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.interpolate import interpolate
-from nurbsfeed.machine import Machine, load_machine, machine_from_mapping
+from nurbsfeed.machine import Machine, load_machine
 from nurbsfeed.pipeline import plan_block
 from nurbsfeed.planning.planner import Plan, plan_curve
 from tests.bench.dense_curves import dense_curves
-from tests.conftest import default_paper_profile
+from tests.conftest import default_paper_machine
 from tests.motion_from_positions import path_motion
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -123,7 +123,7 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="the short dense curves only")
     args = parser.parse_args()
     machines = {"default": load_machine("default"),
-                "default" + PAPER_MODEL: machine_from_mapping(default_paper_profile(), "default"),
+                "default" + PAPER_MODEL: default_paper_machine(),
                 "paper-table1": load_machine("paper-table1"),
                 "paper-table1" + PATH_MODEL: load_machine("paper-table1", {"jerk_model": "path"})}
     rows: list[tuple[str, str, Peaks]] = []
