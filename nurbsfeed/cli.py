@@ -502,7 +502,7 @@ def plan(input: Path, dialect: str, reference: bool, **kwargs: Any) -> None:
         click.echo(f"curve {index} {item.curve.name} ({item.location})")
         click.echo(f"  degree {item.curve.degree}, {item.curve.n_ctrl} control points, "
                    f"length {p.length_mm:.6f} {unit}")
-        keys = (f"{len(p.key_node)} rests (the optimal planner's keys)" if p.planner == "optimal"
+        keys = (f"{len(p.key_node)} rests (the {p.planner} planner's keys)" if p.planner != "scurve"
                 else f"{len(p.key_node)} key points after {p.fix_rounds} limit-fix rounds")
         click.echo(f"  kappa0 {p.kappa0_1_mm:.6g} 1/{unit}; {p.n_peaks_above_threshold} "
                    f"curvature peaks >= kappa0; {keys}")
@@ -513,7 +513,7 @@ def plan(input: Path, dialect: str, reference: bool, **kwargs: Any) -> None:
                        f"{item.curve.input_u(p.grid.u[node]):>12.8f} "
                        f"{p.grid.s_mm[node]:>12.6f} {p.grid.kappa_1_mm[node]:>12.6g} "
                        f"{p.key_nominal_mm_s[k]:>10.4f} {p.key_v_mm_s[k]:>10.4f}")
-        if p.planner == "optimal":
+        if p.planner != "scurve":
             _echo_stretches(p, unit)
         else:
             _echo_segments(p, unit)

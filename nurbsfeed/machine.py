@@ -68,7 +68,7 @@ FLOAT_KEYS = (REQUIRED_KEYS + ("max_curve_time_s", "min_block_time_s", "rest_mov
 INT_KEYS = ("decimals", "feed_decimals", "move_periods")
 JERK_MODELS = ("paper", "path")  # profile key jerk_model (planning.path_model)
 # profile key planner: the paper's key points and S-curves, or planning.optimal (path model)
-PLANNERS = ("scurve", "optimal")
+PLANNERS = ("scurve", "optimal", "envelope")
 OPTIMAL_NEEDS_SCIPY = ("planner: optimal needs scipy (its linear programs): "
                        "pip install 'nurbsfeed[optimal]'")
 # The accepted values, ends included (README "Profile keys" says why each is physical).
@@ -197,8 +197,8 @@ def machine_from_mapping(data: Any, where: str, places: Mapping[str, Location] |
         raise _refused(f"per-axis limits ({', '.join(axis_given)}) hold only under "
                        "jerk_model: path (the paper's model limits the path alone)",
                        (*axis_given, "jerk_model"), places, overrides, here)
-    if planner == "optimal" and jerk_model != "path":
-        raise _refused("planner: optimal plans under jerk_model: path only (the paper's planner "
+    if planner in ("optimal", "envelope") and jerk_model != "path":
+        raise _refused(f"planner: {planner} plans under jerk_model: path only (the paper's planner "
                        "is the paper's model's)", ("planner", "jerk_model"), places, overrides,
                        here)
     if planner == "optimal" and importlib.util.find_spec("scipy") is None:

@@ -57,6 +57,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -105,17 +106,22 @@ def _hermite(x: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 @dataclass(frozen=True, eq=False)
 class _Nodes:
-    """The schedule's nodes (M,): arc length, parameter, rest flags; and the slope matrix
-    (M, M): d = slopes @ b."""
+    """The schedule's nodes (M,): arc length, parameter, rest flags."""
 
     s_mm: np.ndarray
     u: np.ndarray
     rest: np.ndarray
-    slopes: Any  # scipy.sparse.csr_matrix (M, M)
 
     @property
     def h_mm(self) -> np.ndarray:
         return np.diff(self.s_mm)
+
+    @cached_property
+    def slopes(self) -> Any:
+        """The slope matrix (M, M), scipy.sparse.csr_matrix: d = slopes @ b (`_slope_matrix`).
+        Made when first asked for: the envelope planner gives its own slopes and runs without
+        scipy."""
+        return _slope_matrix(self.s_mm, self.rest)
 
 
 def _slope_matrix(s_mm: np.ndarray, rest: np.ndarray) -> Any:
@@ -178,7 +184,7 @@ def _nodes(curve: NurbsCurve, grid: Grid, lim: Limits, s_mm: np.ndarray, u: np.n
         u = np.concatenate([u, arc_parameters(curve, grid, more)])[order]
         rest = np.concatenate([rest, np.zeros(more.size, dtype=bool)])[order]
         s_mm = s_all[order]
-    return _Nodes(s_mm, u, rest, _slope_matrix(s_mm, rest))
+    return _Nodes(s_mm, u, rest)
 
 
 @dataclass(frozen=True, eq=False)
@@ -419,8 +425,10 @@ def _cell_times(nodes: _Nodes, b: np.ndarray, d: np.ndarray) -> np.ndarray:
                         np.where(rest[1:], 3 * h / np.sqrt(b[:-1]), quad))
 
 
-def cycle_s(nodes: _Nodes, b: np.ndarray) -> float:
-    total = float(_cell_times(nodes, b, nodes.slopes @ b).sum())
+def cycle_s(nodes: _Nodes, b: np.ndarray, d: np.ndarray | None = None) -> float:
+    """The schedule's duration: b (M,) at the nodes, with slopes d (M,) there (the three-point
+    differences of b when None)."""
+    total = float(_cell_times(nodes, b, nodes.slopes @ b if d is None else d).sum())
     return total if math.isfinite(total) else math.inf
 
 
@@ -450,13 +458,15 @@ def _arc_at(nodes: _Nodes, b: np.ndarray, d: np.ndarray, t_node: np.ndarray,
     return out
 
 
-def schedule_law(nodes: _Nodes, b: np.ndarray, period_s: float, slowdown: float = 1.0
-                 ) -> TimeLaw:
-    """The time law of the schedule b (M,), each stretch between rests slowed by `slowdown`
-    and stretched to whole periods (module docstring). Key times: the rests'."""
+def schedule_law(nodes: _Nodes, b: np.ndarray, period_s: float, slowdown: float = 1.0,
+                 d: np.ndarray | None = None) -> TimeLaw:
+    """The time law of the schedule b (M,) with slopes d (M,) at the nodes (the three-point
+    differences of b when None), each stretch between rests slowed by `slowdown` and stretched
+    to whole periods (module docstring). Key times: the rests'."""
     from scipy.interpolate import PPoly, make_interp_spline
 
-    d = nodes.slopes @ b
+    if d is None:
+        d = nodes.slopes @ b
     cell_t = _cell_times(nodes, b, d)
     t_node = np.concatenate([[0.0], np.cumsum(cell_t)])
     rests = np.flatnonzero(nodes.rest)
@@ -488,12 +498,13 @@ def schedule_law(nodes: _Nodes, b: np.ndarray, period_s: float, slowdown: float 
 
 
 def _refined(curve: NurbsCurve, grid: Grid, nodes: _Nodes, b: np.ndarray,
-             period_s: float) -> tuple[_Nodes, np.ndarray] | None:
+             period_s: float, d: np.ndarray | None = None) -> tuple[_Nodes, np.ndarray] | None:
     """Cells lasting longer than REFINE_PERIODS periods cut into pieces that do not, and b
-    interpolated on the new nodes; None if none does."""
+    interpolated on the new nodes; None if none does. d: the slopes at the nodes (the
+    three-point differences of b when None)."""
     from nurbsfeed.planning.planner import arc_parameters
 
-    cell_t = _cell_times(nodes, b, nodes.slopes @ b)
+    cell_t = _cell_times(nodes, b, nodes.slopes @ b if d is None else d)
     long = (cell_t > REFINE_PERIODS * period_s) & ~nodes.rest[:-1] & ~nodes.rest[1:]
     long &= np.isfinite(cell_t)
     if not long.any():
@@ -510,7 +521,7 @@ def _refined(curve: NurbsCurve, grid: Grid, nodes: _Nodes, b: np.ndarray,
     rest = np.concatenate([nodes.rest, np.zeros(more.size, dtype=bool)])[order]
     b_all = np.concatenate([b, np.interp(more, s, b)])[order]
     s_all = s_all[order]
-    return _Nodes(s_all, u, rest, _slope_matrix(s_all, rest)), b_all
+    return _Nodes(s_all, u, rest), b_all
 
 
 def _cell_ratios(curve: NurbsCurve, grid: Grid, nodes: _Nodes, law: TimeLaw,

@@ -752,7 +752,7 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
     plan = Plan(curve, lim, grid, kappa0, int(on.n_peaks), on.key_node, on.key_kind, on.nominal,
                 on.v, on.peak, on.hold_start, on.hold_end, law, slowdown, piece_key,
                 piece_periods, piece_scale, on.rounds, acc, jerk)
-    if lim.planner == "optimal":
+    if lim.planner in ("optimal", "envelope"):
         return _optimal_plan(plan, feed_u, feed_mm_s)
     return plan
 
@@ -771,8 +771,14 @@ def _optimal_plan(base: Plan, feed_u: np.ndarray, feed_mm_s: np.ndarray) -> Plan
                  law.duration_s, np.ascontiguousarray(grid.s_mm), np.full(grid.u.size, -np.inf),
                  v_nodes)
     v_nodes /= float(base.piece_scale.max(initial=1.0))
-    schedule = optimal_schedule(base.curve, grid, lim, rest_nodes, v_nodes,
-                                lambda u: feed_at(u, feed_u, feed_mm_s))
+    if lim.planner == "envelope":
+        from nurbsfeed.planning.envelope import envelope_schedule
+
+        schedule = envelope_schedule(base.curve, grid, lim, rest_nodes,
+                                     lambda u: feed_at(u, feed_u, feed_mm_s))
+    else:
+        schedule = optimal_schedule(base.curve, grid, lim, rest_nodes, v_nodes,
+                                    lambda u: feed_at(u, feed_u, feed_mm_s))
     if schedule is None or not schedule.law.duration_s < base.cycle_time_s:
         return base
     rest_nodes = schedule.rest_nodes
@@ -790,4 +796,4 @@ def _optimal_plan(base: Plan, feed_u: np.ndarray, feed_mm_s: np.ndarray) -> Plan
         arr.setflags(write=False)
     return Plan(base.curve, lim, grid, base.kappa0_1_mm, base.n_peaks_above_threshold,
                 *arrays[:7], schedule.law, schedule.slowdown, *arrays[7:], schedule.rounds,
-                base.scurve_acc_mm_s2, base.scurve_jerk_mm_s3, "optimal")
+                base.scurve_acc_mm_s2, base.scurve_jerk_mm_s3, lim.planner)
