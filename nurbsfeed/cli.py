@@ -550,8 +550,9 @@ def _echo_segments(p: Plan, unit: str) -> None:
 
 
 def _echo_stretches(p: Plan, unit: str) -> None:
-    """The optimal plan's stretches between rests: its keys are the rests alone."""
-    click.echo(f"  optimal schedule: {p.fix_rounds} limit-fix rounds, uniform slowdown "
+    """The stretches between rests of a plan whose keys are the rests alone (the envelope and
+    optimal planners')."""
+    click.echo(f"  {p.planner} schedule: {p.fix_rounds} limit-fix rounds, uniform slowdown "
                f"{p.uniform_slowdown:.4f}; stretches between rests ({unit}, {unit}/s):")
     click.echo(f"  {'#':>3} {'length':>12} {'v_peak':>10} {'periods':>10}")
     key_s = p.key_s_mm

@@ -40,11 +40,13 @@ def load_curve(name: str, folder: Path = SAMPLES) -> NurbsCurve:
 
 
 def default_paper_profile() -> dict[str, object]:
-    """configs/default.yaml without its jerk_model and per-axis keys: its path limits (200 mm/s,
-    2000 mm/s^2, 50,000 mm/s^3, 1 ms) under the paper's jerk model, the default profile as it
-    was before it moved to the path model (the paper model's tests are written for it)."""
+    """configs/default.yaml without its jerk_model, planner and per-axis keys: its path limits
+    (200 mm/s, 2000 mm/s^2, 50,000 mm/s^3, 1 ms) under the paper's jerk model and planner, the
+    default profile as it was before it moved to the path model (the paper model's tests are
+    written for it)."""
     values = yaml.safe_load((ROOT / "configs" / "default.yaml").read_text())
-    return {k: v for k, v in values.items() if k != "jerk_model" and k not in AXIS_KEYS}
+    return {k: v for k, v in values.items()
+            if k not in ("jerk_model", "planner") and k not in AXIS_KEYS}
 
 
 def default_paper_machine(**overrides: object) -> Machine:

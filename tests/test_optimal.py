@@ -236,8 +236,8 @@ def test_check_passes_an_optimal_program_that_lets_j_follow_kappa2_v3(tmp_path: 
 def test_the_planner_key_is_read_checked_and_overridden(tmp_path: Path) -> None:
     assert machine_from_mapping(PATH_PROFILE, "test").limits.planner == "scurve"
     assert machine_from_mapping(OPTIMAL, "test").limits.planner == "optimal"
-    with pytest.raises(ProfileError, match="'planner' must be one of scurve, optimal, not "
-                                           "'fastest'"):
+    with pytest.raises(ProfileError, match="'planner' must be one of scurve, optimal, "
+                                           "envelope, not 'fastest'"):
         machine_from_mapping({**PATH_PROFILE, "planner": "fastest"}, "test")
     with pytest.raises(ProfileError, match="planner: optimal plans under jerk_model: path only"):
         machine_from_mapping({**PAPER_LIMITS, "planner": "optimal"}, "test")

@@ -17,17 +17,20 @@ from numpy.polynomial.legendre import leggauss
 from nurbsfeed.cli import main
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.interpolate import LEG_ARC_MAX, Interpolation, interpolate
-from nurbsfeed.machine import load_machine, machine_from_mapping
+from nurbsfeed.machine import machine_from_mapping
 from nurbsfeed.pipeline import plan_block
 from nurbsfeed.planning.planner import plan_curve
 from nurbsfeed.program import CurveBlock
 from nurbsfeed.readers import read_program
 from nurbsfeed.readers.json_curves import read_json_curves
 from nurbsfeed.safety import MotionGuard
+from tests.conftest import default_paper_machine
 from tests.test_path_model import PAPER_LIMITS, PATH_PROFILE
 
 DATA = Path(__file__).parent / "data" / "stepping-stops"
-MACHINE = load_machine("default", {})
+# the default's limits under the paper model: the law's own jerk, which the tests below hold
+# the stepped arc to, is a limit there (under the path model j - kappa^2 v^3 is)
+MACHINE = default_paper_machine()
 # the jerk of the true arc may exceed J_t by this fraction: rk2c's arc minus chord changes from
 # step to step at a sharp turn, by up to (arc - chord) / T^3 (in stop-jerk, beside its stop, a
 # chord step arcs 1.8 % = 1.6 nm over its 91 nm target: 2.7 % of J_t; 1.4 % before planning

@@ -54,13 +54,13 @@ from nurbsfeed.planning.optimal import (
     _cell_times,
     _hermite_basis,
     _jumps,
-    _nodes,
     _Nodes,
+    _nodes,
     _refined,
     cycle_s,
 )
-from nurbsfeed.planning.timelaw import TimeLaw
 from nurbsfeed.planning.path_model import frames, jump_speeds, static_limit
+from nurbsfeed.planning.timelaw import TimeLaw
 
 # each round raises the last round's profile by this factor (of b) at most, then lowers it to
 # what the limits allow with their terms frozen at the raised one: the factors fall to 1 so
@@ -70,8 +70,8 @@ INNER_ROUNDS = 60  # cap, slope and curvature passes of the last round, at most
 EARLY_ROUNDS = 10  # ... of the rounds before it, which only shape the terms to freeze
 CONVERGED_REL = 1e-4  # a pass lowering no b by more than this share of it: converged
 LIFT_STEPS = 30  # Newton steps of `_lift_pass`, bracketed
-FIX_ROUNDS = 3  # rounds that lower the limits where the law exceeds them
-FIX_REL = 0.02  # ... while it does so by more than this
+FIX_ROUNDS = 4  # rounds that lower the limits where the law exceeds them
+FIX_REL = 0.01  # ... while it does so by more than this
 REFINE_ROUNDS = 2  # times cells lasting longer than the optimal planner's limit are split
 TINY = 1e-12
 
@@ -604,9 +604,23 @@ def _cell_rows(spline: _Spline, s: np.ndarray, geo: np.ndarray, geo_end: np.ndar
     return (lo, np.maximum(hi, lo), lo_axes, kappa2, scale3, np.ascontiguousarray(rows))
 
 
+def _node_slopes(s: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """d values / ds (N,) at the points s (N,) by differences, 0 where two points coincide."""
+    if s.size < 2:
+        return np.zeros(s.size)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = np.gradient(values, s) if np.all(np.diff(s) > 0.0) else np.full(s.size, np.nan)
+    if not np.all(np.isfinite(out)):
+        step = np.diff(s)
+        slope = np.divide(np.diff(values), step, out=np.zeros(step.size), where=step > 0.0)
+        out = np.concatenate([slope[:1], 0.5 * (slope[:-1] + slope[1:]), slope[-1:]])
+    return out
+
+
 def _profile(curve: NurbsCurve, grid: Grid, lim: Limits, nodes: _Nodes,
              feed_at_u: Callable[[np.ndarray], np.ndarray], scale: np.ndarray,
-             start: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+             start: np.ndarray | None, growth_rounds: tuple[float, ...] = GROWTH
+             ) -> tuple[np.ndarray, np.ndarray]:
     """The greatest spline the passes find on these nodes, as b and b' (M,) at the nodes; the
     limits scaled per node by scale (M,) (FIX_ROUNDS lower it where the law exceeded a limit):
     a speed by scale, an acceleration by scale^2, a jerk by scale^3.
@@ -616,7 +630,7 @@ def _profile(curve: NurbsCurve, grid: Grid, lim: Limits, nodes: _Nodes,
     near the new one, so the passes never act on a b far above the profile they shape (a
     curvature bound frozen at the caps asks b'' > 0 over whole stretches and drives b to 0).
     start: b (M,) at the nodes to grow from instead (a profile planned before, on other
-    nodes or limits)."""
+    nodes or limits), growth_rounds the factors of the rounds (GROWTH)."""
     from nurbsfeed.planning.planner import arc_parameters
 
     spline = _Spline(nodes)
@@ -659,10 +673,11 @@ def _profile(curve: NurbsCurve, grid: Grid, lim: Limits, nodes: _Nodes,
         # keeps every limit at b' = b'' = 0
         frozen_d, frozen_dd = np.zeros(m), np.zeros(m - 1)
     else:
-        frozen_d = np.gradient(frozen_b, s)
-        frozen_dd = np.diff(frozen_d) / np.diff(s)
-    for index, growth in enumerate(GROWTH):
-        last_round = index == len(GROWTH) - 1
+        frozen_d = _node_slopes(s, frozen_b)
+        step = np.diff(s)
+        frozen_dd = np.divide(np.diff(frozen_d), step, out=np.zeros(m - 1), where=step > 0.0)
+    for index, growth in enumerate(growth_rounds):
+        last_round = index == len(growth_rounds) - 1
         # sqrt(b) where it divides a limit, and the terms in b that tighten a bound, at the
         # ceiling: b only falls below it, so those rows are conservative; the rest at the last
         # round's profile
@@ -698,10 +713,14 @@ def _profile(curve: NurbsCurve, grid: Grid, lim: Limits, nodes: _Nodes,
 
 
 def envelope_schedule(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.ndarray,
-                      feed_at_u: Callable[[np.ndarray], np.ndarray]) -> Schedule | None:
+                      v_start: np.ndarray, feed_at_u: Callable[[np.ndarray], np.ndarray],
+                      worst_s: float = math.inf) -> Schedule | None:
     """The schedule of `curve` under `lim` (path model) resting at grid nodes rest_nodes: the
-    ends, corners and cusps. feed_at_u: parameters (N,) -> programmed feed (N,). None where it
-    cannot plan (a profile of b = 0 inside a stretch: a motion that never arrives)."""
+    ends, corners and cusps. v_start (M,): a speed at the grid's nodes that keeps the limits
+    (the S-curve plan's), which sets where cells are cut finer. feed_at_u: parameters (N,) ->
+    programmed feed (N,). None where it cannot plan (a profile of b = 0 inside a stretch: a
+    motion that never arrives) or where its schedule would last longer than worst_s (the plan
+    it would replace)."""
     if grid.length_mm <= 0.0:
         return None
     floor = 1e-9 * float(grid.s_mm[-1])
@@ -713,18 +732,19 @@ def envelope_schedule(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np
                    rest)
     if int(nodes.rest.sum()) != rest_nodes.size:
         return None
-    b, d = _profile(curve, grid, lim, nodes, feed_at_u, np.ones(nodes.s_mm.size), None)
+    # cells cut where the S-curve plan spends more than a few periods in one: the schedule is
+    # faster, so they last no longer under it (one profile, not one a refinement)
+    b_start = np.interp(nodes.s_mm, grid.s_mm, v_start) ** 2
     for _ in range(REFINE_ROUNDS):
-        if not math.isfinite(cycle_s(nodes, b, d)):
-            return None
-        refined = _refined(curve, grid, nodes, b, lim.period_s, d)
+        refined = _refined(curve, grid, nodes, b_start, lim.period_s,
+                           _node_slopes(nodes.s_mm, b_start))
         if refined is None:
             break
         nodes, b_start = refined
-        b, d = _profile(curve, grid, lim, nodes, feed_at_u, np.ones(nodes.s_mm.size), b_start)
-    if not math.isfinite(cycle_s(nodes, b, d)):
-        return None
     scale = np.ones(nodes.s_mm.size)
+    b, d = _profile(curve, grid, lim, nodes, feed_at_u, scale, None)
+    if not cycle_s(nodes, b, d) < worst_s:
+        return None
     law = sampled_law(nodes, b, d, lim.period_s)
     excess, per_cell = _cell_ratios(curve, grid, nodes, law, lim)
     best = (law.duration_s * excess, b, d, excess)
@@ -737,8 +757,9 @@ def envelope_schedule(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np
         near[:-1] = np.maximum(near[:-1], per_cell)
         near[1:] = np.maximum(near[1:], per_cell)
         scale = scale / near
-        b, d = _profile(curve, grid, lim, nodes, feed_at_u, scale, b)
-        if not math.isfinite(cycle_s(nodes, b, d)):
+        # the last profile, lowered where the law broke a limit: one round, no growth
+        b, d = _profile(curve, grid, lim, nodes, feed_at_u, scale, b, (1.0,))
+        if not cycle_s(nodes, b, d) < worst_s:
             break
         law = sampled_law(nodes, b, d, lim.period_s)
         excess, per_cell = _cell_ratios(curve, grid, nodes, law, lim)

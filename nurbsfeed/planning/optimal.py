@@ -169,13 +169,19 @@ def _nodes(curve: NurbsCurve, grid: Grid, lim: Limits, s_mm: np.ndarray, u: np.n
     rest_index = np.flatnonzero(rest)
     extra = [np.linspace(s_mm[a], s_mm[b], MIN_STRETCH_CELLS + 1)[1:-1]
              for a, b in zip(rest_index[:-1], rest_index[1:]) if b - a < MIN_STRETCH_CELLS]
-    acc = min([lim.acc_mm_s2] + [a for a in lim.axis_acc_mm_s2 if math.isfinite(a)])
-    jerk = min([lim.jerk_mm_s3] + [j for j in lim.axis_jerk_mm_s3 if math.isfinite(j)])
+    # the axes the curve moves: a still axis's limits shape no start (a Z at 0.001 mm/s^2 put
+    # nodes 1e-20 mm apart, which the end's arc length could not tell apart)
+    moving = np.ptp(curve.points, axis=0) > 0.0
+    acc = min([lim.acc_mm_s2] + [a for a, m in zip(lim.axis_acc_mm_s2, moving)
+                                 if m and math.isfinite(a)])
+    jerk = min([lim.jerk_mm_s3] + [j for j, m in zip(lim.axis_jerk_mm_s3, moving)
+                                   if m and math.isfinite(j)])
     first = REST_CELL_SHARE * acc**3 / (6.0 * jerk**2)
     for a, b in zip(rest_index[:-1], rest_index[1:]):
         half = (s_mm[b] - s_mm[a]) / 2
         near = min(first, half / REST_CELLS_PER_STRETCH) * 2.0 ** np.arange(64)
-        near = near[near < min(half / 2, s_mm[a + 1] - s_mm[a], s_mm[b] - s_mm[b - 1])]
+        near = near[(near < min(half / 2, s_mm[a + 1] - s_mm[a], s_mm[b] - s_mm[b - 1]))
+                    & (near >= floor)]
         extra += [s_mm[a] + near, s_mm[b] - near]
     if extra:
         more = np.setdiff1d(np.concatenate(extra), s_mm)

@@ -774,8 +774,9 @@ def _optimal_plan(base: Plan, feed_u: np.ndarray, feed_mm_s: np.ndarray) -> Plan
     if lim.planner == "envelope":
         from nurbsfeed.planning.envelope import envelope_schedule
 
-        schedule = envelope_schedule(base.curve, grid, lim, rest_nodes,
-                                     lambda u: feed_at(u, feed_u, feed_mm_s))
+        schedule = envelope_schedule(base.curve, grid, lim, rest_nodes, v_nodes,
+                                     lambda u: feed_at(u, feed_u, feed_mm_s),
+                                     base.cycle_time_s)
     else:
         schedule = optimal_schedule(base.curve, grid, lim, rest_nodes, v_nodes,
                                     lambda u: feed_at(u, feed_u, feed_mm_s))

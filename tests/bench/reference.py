@@ -1,25 +1,25 @@
-"""How far the planner is from the jerk-limited optimum (issue 15), as a markdown table. From the
-repository root:
+"""How far the planners are from the jerk-limited optimum (issue 28), as a markdown table. From
+the repository root:
 
     python -m tests.bench.reference            # the JSON samples and the short dense curves
     python -m tests.bench.reference --quick    # the quarter circle and the figure-eight only
 
-Each curve is planned under `paper-table1`, and under `paper-table1` with `jerk_model: path` by
-both planners (`planner: scurve`, the paper's key points and S-curves, and `planner: optimal`,
-docs/design.md §2d), and three cycle times are set side by side:
+Each curve is planned under two settings, both on the path model: the default profile
+(configs/default.yaml: path and per-axis limits) and paper-table1's limits with `jerk_model:
+path`; under each by the envelope planner (`planner: envelope`, the default's, docs/design.md
+§2e) and by the S-curve planner (`planner: scurve`, the paper's key points and S-curves). Beside
+each plan stand:
 
 - the time-optimal bound (`analysis.common.time_optimal_bound_s`): rest to rest under the
   pointwise speed limit and |a| <= A_t alone, a lower bound on every schedule that keeps the
   limits (jerk only makes it slower);
 - the jerk-limited reference (`analysis.bound`, `plan --reference`): a schedule found by its own
-  code that keeps every limit of the same model, so the optimum is no slower than it;
-- the planner's.
+  code (linear programs) that keeps every limit of the same model, so the optimum is no slower.
 
 The optimum lies between the bound and the smaller of the other two. planned / reference above 1
-says the planner is at least that far from the optimum; below 1, the reference is the looser
-(it is within 1.5 % of the closed form on a straight line, tests/test_bound.py). Measured here,
-never asserted; the reference and the optimal planner take seconds to minutes a curve (HiGHS,
-one process).
+says the planner is at least that far from the optimum; below 1, the reference is the looser.
+Measured here, never asserted; the reference takes seconds to minutes a curve (HiGHS, one
+process), the planners milliseconds to a second.
 """
 
 from __future__ import annotations
@@ -33,13 +33,24 @@ import numpy as np
 from nurbsfeed.analysis.bound import jerk_limited_schedule
 from nurbsfeed.analysis.common import curve_blocks, time_optimal_bound_s
 from nurbsfeed.geometry import NurbsCurve
-from nurbsfeed.machine import load_machine
+from nurbsfeed.machine import Machine, load_machine
 from nurbsfeed.planning.planner import plan_curve
 from tests.bench.dense_curves import dense_curves
 from tests.bench.path_jerk import ROOT
 
 SAMPLES = ("quarter-circle.json", "circle.json", "butterfly.json")
-PROFILE = "paper-table1"
+PLANNERS = ("envelope", "scurve")
+
+
+def settings() -> dict[str, dict[str, Machine]]:
+    """Per setting, a machine per planner."""
+    return {
+        "default": {planner: load_machine("default", {"planner": planner})
+                    for planner in PLANNERS},
+        "paper-table1 path": {planner: load_machine("paper-table1", {"jerk_model": "path",
+                                                                     "planner": planner})
+                              for planner in PLANNERS},
+    }
 
 
 def main() -> None:
@@ -47,10 +58,6 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true",
                         help="the quarter circle and the figure-eight only")
     args = parser.parse_args()
-    machines = {"paper": load_machine(PROFILE),
-                "path": load_machine(PROFILE, {"jerk_model": "path"}),
-                "path optimal": load_machine(PROFILE, {"jerk_model": "path",
-                                                       "planner": "optimal"})}
     cases: list[tuple[str, NurbsCurve, np.ndarray, np.ndarray]] = []  # with programmed feeds
     for name in SAMPLES[:1] if args.quick else SAMPLES:
         for block in curve_blocks(ROOT / "samples" / name):
@@ -58,31 +65,32 @@ def main() -> None:
     dense = dense_curves(quick=True)
     for curve in dense[:1] if args.quick else dense:
         cases.append((curve.name, curve, np.empty(0), np.empty(0)))
-    print(f"Cycle times in s under {PROFILE}'s limits; ratio = planned / reference.\n")
-    print("| curve | model | planner | bound | reference | planned | ratio | planner CPU s "
-          "| reference CPU s |")
-    print("|---|---|---|---:|---:|---:|---:|---:|---:|")
-    ratios: dict[str, list[float]] = {setting: [] for setting in machines}
+    print("Cycle times in s; ratio = planned / reference; CPU in s of one process.\n")
+    print("| curve | setting | bound | reference | envelope | ratio | scurve | ratio "
+          "| envelope CPU | scurve CPU | reference CPU |")
+    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    ratios: dict[tuple[str, str], list[float]] = {}
     for name, curve, feed_u, feed in cases:
-        references: dict[str, tuple[float, float]] = {}
-        for setting, machine in machines.items():
-            model = machine.limits.jerk_model
-            start = time.process_time()
-            plan = plan_curve(curve, machine.limits, feed_u, feed)
-            plan_cpu = time.process_time() - start
-            if model not in references:
+        for setting, machines in settings().items():
+            planned = {}
+            for planner, machine in machines.items():
                 start = time.process_time()
-                ref = jerk_limited_schedule(curve, machine.limits, feed_u, feed)
-                references[model] = (ref.cycle_s, time.process_time() - start)
-            ref_s, ref_cpu = references[model]
-            ratio = plan.cycle_time_s / ref_s
-            ratios[setting].append(ratio)
-            print(f"| {name} | {model} | {plan.planner} | {time_optimal_bound_s(plan):.3f} | "
-                  f"{ref_s:.3f} | {plan.cycle_time_s:.3f} | {ratio:.3f} | {plan_cpu:.1f} | "
-                  f"{ref_cpu:.1f} |", flush=True)
+                plan = plan_curve(curve, machine.limits, feed_u, feed)
+                planned[planner] = (plan, time.process_time() - start)
+            start = time.process_time()
+            ref = jerk_limited_schedule(curve, machines["envelope"].limits, feed_u, feed)
+            ref_cpu = time.process_time() - start
+            row = [name, setting, f"{time_optimal_bound_s(planned['envelope'][0]):.3f}",
+                   f"{ref.cycle_s:.3f}"]
+            for planner in PLANNERS:
+                ratio = planned[planner][0].cycle_time_s / ref.cycle_s
+                ratios.setdefault((setting, planner), []).append(ratio)
+                row += [f"{planned[planner][0].cycle_time_s:.3f}", f"{ratio:.3f}"]
+            row += [f"{planned[p][1]:.2f}" for p in PLANNERS] + [f"{ref_cpu:.1f}"]
+            print("| " + " | ".join(row) + " |", flush=True)
     print()
-    for setting, values in ratios.items():
-        print(f"{setting}: median ratio {statistics.median(values):.3f}, "
+    for (setting, planner), values in ratios.items():
+        print(f"{setting}, {planner}: median ratio {statistics.median(values):.3f}, "
               f"largest {max(values):.3f} over {len(values)} curves")
 
 
