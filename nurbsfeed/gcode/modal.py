@@ -173,14 +173,18 @@ class ModalState:
     # ---- executing a block -------------------------------------------------------------------
     def apply_feed(self, word: Word) -> FeedWord:
         """A new modal F; F must not be negative (F0 is legal on rapid-only programs)."""
+        self.feed = self.feed_from(word)
+        return self.feed
+
+    def feed_from(self, word: Word) -> FeedWord:
+        """The modal F an F word sets, checked, without setting it."""
         if word.value < 0:
             raise InputError(f"{word.name}: a feed must not be negative", self.where(word))
         # restored after our moves, so written our way: with a decimal point (F60 -> F60.),
         # a parameter as its value; a value already written with a point is kept as written
         plain = "." in word.text and "#" not in word.text
         text = word.name if plain else "F" + format_value(word.value)
-        self.feed = FeedWord(word.value, text)
-        return self.feed
+        return FeedWord(word.value, text)
 
     def apply(self, block: Block) -> None:
         """Execute one block that is not part of a NURBS block (parse -> check -> execute)."""

@@ -42,10 +42,24 @@ from nurbsfeed.files import BOM
 from nurbsfeed.gcode import point_lines
 from nurbsfeed.gcode.fanuc import NurbsCurveReader, stray_knot
 from nurbsfeed.gcode.linuxcnc import G52BlockReader
-from nurbsfeed.gcode.modal import AXES, G5_2, G5_3, G6_2, NO_POSITION_EFFECT, ModalState
+from nurbsfeed.gcode.linuxcnc_splines import G5, G5_1, is_spline_block, read_spline
+from nurbsfeed.gcode.modal import (
+    AXES,
+    G5_2,
+    G5_3,
+    G6_2,
+    GROUP1_MOVES,
+    NO_POSITION_EFFECT,
+    PROBES,
+    SPLINES,
+    ModalState,
+)
 from nurbsfeed.gcode.nurbs_block import FinishedCurve, first_word, motion_words
-from nurbsfeed.gcode.tokenizer import Block, Param, tokenize_line
+from nurbsfeed.gcode.tokenizer import Block, Param, ParamKey, Word, code_name, tokenize_line
 from nurbsfeed.program import CurveBlock, PassThrough, ProgramItem
+
+G1 = 10
+MOTION_CODES = GROUP1_MOVES | PROBES | SPLINES | {G5_2, G6_2}
 
 
 def read_gcode(path: Path, lines: Iterator[str], dialect: str = "auto"
@@ -71,11 +85,14 @@ class _Reader:
         self.path = path
         self.dialect = dialect
         self.state = ModalState(path)
-        self.params: dict[int, Param] = {}
+        self.params: dict[ParamKey, Param] = {}
         self.open: NurbsCurveReader | G52BlockReader | None = None
         self.eol = "\n"
         self.last_curve: NurbsCurveReader | None = None  # the modal G6.2 curve's rules
         self.kept: list[str] = []  # the inert lines inside the open block, yielded before it
+        self.g5_exit: tuple[float, float] | None = None  # -P -Q of a G5 that ends here
+        # the last G5 / G5.1 and the motion mode it left in force, while that is not G1
+        self.spline_after: tuple[Word, int] | None = None
 
     def items(self, lines: Iterator[str]) -> Iterator[ProgramItem]:
         ahead = _LookAhead(lines)
@@ -121,14 +138,21 @@ class _Reader:
                 elif self.open.take(block):
                     yield from self._close()
             else:
+                spline = self._spline_word(block)
+                if spline is not None:
+                    self.eol = block.eol or _line_ending(line_text)
+                    yield self._spline(block, spline)
+                    continue
                 self.open = self._start(block)
                 if self.open is None:
+                    self._check_after_spline(block)
                     self.state.apply(block)
+                    self._moved(block)
                     yield PassThrough(line_text)
                 else:
                     self.eol = block.eol or _line_ending(line_text)
             for assignment in block.assignments:
-                self.params[assignment.number] = assignment.param
+                self.params[assignment.key] = assignment.param
         if self.open is not None:
             raise self.open.unfinished()
 
@@ -150,6 +174,50 @@ class _Reader:
         ahead.drop(n)
         return n
 
+    def _spline_word(self, block: Block) -> Word | None:
+        """The G5 / G5.1 word of a LinuxCNC spline block, or None (module docstring)."""
+        if self.dialect == "fanuc":
+            return None
+        g = block.codes("G")
+        for code in (G5, G5_1):
+            if code in g and is_spline_block(block, code):
+                return g[code]
+        return None
+
+    def _spline(self, block: Block, start: Word) -> CurveBlock:
+        """The CurveBlock of one G5 / G5.1 block (linuxcnc_splines.py)."""
+        before = self.state.motion
+        finished, self.g5_exit = read_spline(block, self.state, start, self.g5_exit)
+        if before not in (None, G1):
+            self.spline_after = (start, before)
+        return self._curve_block(finished)
+
+    def _check_after_spline(self, block: Block) -> None:
+        """After a G5 / G5.1 in a motion mode other than G1, a block of axis words only moves
+        in that mode for LinuxCNC, but in G1 after the moves written in place of the spline:
+        refused (linuxcnc_splines.py)."""
+        if self.spline_after is None:
+            return
+        if block.codes("G").keys() & MOTION_CODES:
+            self.spline_after = None
+            return
+        axes = [word for word in block.words if word.letter in AXES]
+        if axes and all(word.code in NO_POSITION_EFFECT for word in block.words
+                        if word.letter == "G"):
+            spline, mode = self.spline_after
+            raise InputError(f"{axes[0].name} without a G code after the {spline.name} on line "
+                             f"{spline.line}: LinuxCNC moves it in {code_name('G', mode)}, the "
+                             f"mode before the spline, but the G1 moves written in place of the "
+                             f"spline leave G1 in force: write {code_name('G', mode)} on this "
+                             "line", self.state.where(axes[0]))
+
+    def _moved(self, block: Block) -> None:
+        """A pass-through block with G codes or axis words ends a run of G5 splines: the next
+        G5 needs its own I and J."""
+        if self.g5_exit is not None and any(word.letter == "G" or word.letter in AXES
+                                            for word in block.words):
+            self.g5_exit = None
+
     def _close(self) -> Iterator[ProgramItem]:
         """The kept lines of the block just completed, then its CurveBlock."""
         assert self.open is not None, "called when a block completes"
@@ -159,6 +227,8 @@ class _Reader:
             self.kept = []
         yield self._curve_block(finished)
         self.open = None
+        self.g5_exit = None
+        self.spline_after = None
 
     def _start(self, block: Block) -> NurbsCurveReader | G52BlockReader | None:
         """The reader of the NURBS block this block opens, or None for an ordinary block."""
