@@ -79,7 +79,7 @@ def read_spline(block: Block, state: ModalState, start: Word,
         raise InputError(f"{held.name}: Splines may not have motion in Z, A, B, or C (LinuxCNC): "
                          f"{label} moves X and Y only", state.where(held))
     letters = "NGXYIJPQF" if cubic else "NGXYIJF"
-    what = f"a {label} block ({' '.join(letters[1:])})"
+    what = f"a {label} block ({' '.join(letters[2:])})"
     check_block(block, state, letters, {start.code}, what)
     state.check_nurbs_allowed(start)
     if state.plane != 170:
