@@ -147,7 +147,7 @@ def control_polygons(program: str) -> list[np.ndarray]:
         line = re.sub(r"#<(\w+)>", lambda m: str(params[m.group(1).lower()]), line)
         words = {letter: float(value) for letter, value in re.findall(r"([A-Z])(-?[\d.]+)", line)}
         end = np.array([words.get("X", pos[0]), words.get("Y", pos[1])])
-        spline = re.match(r"G5(\.1)?\s", line)
+        spline = re.search(r"\bG5(\.1)?\s", line)
         if spline:
             first = (pos + np.array([words["I"], words["J"]]) if "I" in words
                      else pos + exit_offset)
