@@ -254,7 +254,8 @@ def test_g6_2_without_q_is_fanuc_in_auto_and_linuxcnc_when_told() -> None:
 def test_unknown_dialect_is_refused_at_the_call() -> None:
     with pytest.raises(InputError) as caught:
         read_gcode(Path("t.nc"), lines_of(""), "heidenhain")
-    assert str(caught.value) == "unknown G-code dialect 'heidenhain' (use auto, fanuc or linuxcnc)"
+    assert str(caught.value) == ("unknown G-code dialect 'heidenhain' (use auto, fanuc, linuxcnc, "
+                                 "siemens)")
 
 
 # ---- modal state --------------------------------------------------------------------------------

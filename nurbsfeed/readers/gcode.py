@@ -32,6 +32,7 @@ number of lines.
 from __future__ import annotations
 
 import itertools
+import re
 from collections import deque
 from collections.abc import Iterator
 from pathlib import Path
@@ -55,10 +56,12 @@ from nurbsfeed.gcode.modal import (
     ModalState,
 )
 from nurbsfeed.gcode.nurbs_block import FinishedCurve, first_word, motion_words
+from nurbsfeed.gcode.siemens import BSPLINE, SUFFIXES, BsplineReader, tokenize_siemens_line
 from nurbsfeed.gcode.tokenizer import Block, Param, ParamKey, Word, code_name, tokenize_line
 from nurbsfeed.program import CurveBlock, PassThrough, ProgramItem
 
 G1 = 10
+_BSPLINE = re.compile(r"\bBSPLINE\b", re.IGNORECASE)
 MOTION_CODES = GROUP1_MOVES | PROBES | SPLINES | {G5_2, G6_2}
 
 
@@ -74,7 +77,9 @@ def read_gcode(path: Path, lines: Iterator[str], dialect: str = "auto"
     reaches it; an unknown dialect is refused at once.
     """
     if dialect not in DIALECTS:
-        raise InputError(f"unknown G-code dialect '{dialect}' (use auto, fanuc or linuxcnc)")
+        raise InputError(f"unknown G-code dialect '{dialect}' (use {', '.join(DIALECTS)})")
+    if dialect == "auto" and path.suffix.lower() in SUFFIXES:
+        dialect = "siemens"
     return _Reader(str(path), dialect).items(lines)
 
 
@@ -86,7 +91,8 @@ class _Reader:
         self.dialect = dialect
         self.state = ModalState(path)
         self.params: dict[ParamKey, Param] = {}
-        self.open: NurbsCurveReader | G52BlockReader | None = None
+        self.open: NurbsCurveReader | G52BlockReader | BsplineReader | None = None
+        self.g70: Word | None = None  # Sinumerik G70 in force (siemens.py)
         self.eol = "\n"
         self.last_curve: NurbsCurveReader | None = None  # the modal G6.2 curve's rules
         self.kept: list[str] = []  # the inert lines inside the open block, yielded before it
@@ -125,7 +131,7 @@ class _Reader:
                     if closed:
                         yield from self._close()
                     continue
-            block = tokenize_line(line_text, line, self.path, self.params)
+            block = self._tokenize(line_text, line)
             if self.open is not None:
                 if block.delimiter:
                     body = line_text.rstrip("\r\n")
@@ -135,26 +141,53 @@ class _Reader:
                                               len(body) - len(body.lstrip(" \t\r")) + 1))
                 if block.is_inert:  # a comment, blank or N-only line: kept, in order
                     self.kept.append(line_text)
+                elif isinstance(self.open, BsplineReader) and self.open.ends_at(block):
+                    yield from self._close()  # then the block that ends it, as any other
+                    yield from self._outside(block, line_text)
                 elif self.open.take(block):
                     yield from self._close()
             else:
-                spline = self._spline_word(block)
-                if spline is not None:
-                    self.eol = block.eol or _line_ending(line_text)
-                    yield self._spline(block, spline)
-                    continue
-                self.open = self._start(block)
-                if self.open is None:
-                    self._check_after_spline(block)
-                    self.state.apply(block)
-                    self._moved(block)
-                    yield PassThrough(line_text)
-                else:
-                    self.eol = block.eol or _line_ending(line_text)
+                yield from self._outside(block, line_text)
             for assignment in block.assignments:
                 self.params[assignment.key] = assignment.param
-        if self.open is not None:
+        if isinstance(self.open, BsplineReader):  # a modal BSPLINE ends with the program
+            yield from self._close()
+        elif self.open is not None:
             raise self.open.unfinished()
+
+    def _tokenize(self, line_text: str, line: int) -> Block:
+        """The line's words, in the syntax of the dialect; under `auto`, a BSPLINE makes the
+        program a Sinumerik one from its line on (the lines before read the same in both)."""
+        if self.dialect == "auto" and _BSPLINE.search(_code_part(line_text)):
+            self.dialect = "siemens"
+        if self.dialect == "siemens":
+            return tokenize_siemens_line(line_text, line, self.path)
+        return tokenize_line(line_text, line, self.path, self.params)
+
+    def _outside(self, block: Block, line_text: str) -> Iterator[ProgramItem]:
+        """A block outside any NURBS block: a G5 / G5.1 curve, the start of a NURBS block, or
+        a line that passes through once executed."""
+        spline = self._spline_word(block)
+        if spline is not None:
+            self.eol = block.eol or _line_ending(line_text)
+            yield self._spline(block, spline)
+            return
+        self.open = self._start(block)
+        if self.open is None:
+            self._check_after_spline(block)
+            if self.dialect == "siemens":
+                self._units_word(block)
+            self.state.apply(block)
+            self._moved(block)
+            yield PassThrough(line_text)
+        else:
+            self.eol = block.eol or _line_ending(line_text)
+
+    def _units_word(self, block: Block) -> None:
+        """Sinumerik G70 (inch, F in the machine's unit) until G700 / G71 / G710."""
+        for word in block.words:
+            if word.letter == "G" and word.code in (200, 210):
+                self.g70 = word if word.text.rstrip(".") == "70" else None
 
     def _take_run(self, ahead: _LookAhead, line: int) -> int:
         """`NurbsCurveReader.take_run` on the next lines (line number `line` on), at most
@@ -176,7 +209,7 @@ class _Reader:
 
     def _spline_word(self, block: Block) -> Word | None:
         """The G5 / G5.1 word of a LinuxCNC spline block, or None (module docstring)."""
-        if self.dialect == "fanuc":
+        if self.dialect in ("fanuc", "siemens"):
             return None
         g = block.codes("G")
         for code in (G5, G5_1):
@@ -230,10 +263,13 @@ class _Reader:
         self.g5_exit = None
         self.spline_after = None
 
-    def _start(self, block: Block) -> NurbsCurveReader | G52BlockReader | None:
+    def _start(self, block: Block) -> NurbsCurveReader | G52BlockReader | BsplineReader | None:
         """The reader of the NURBS block this block opens, or None for an ordinary block."""
         g = block.codes("G")
         state = self.state
+        if self.dialect == "siemens":
+            bspline = block.first(BSPLINE)
+            return None if bspline is None else BsplineReader(block, state, bspline, self.g70)
         if G6_2 in g:
             question = block.first("Q")
             linuxcnc = self.dialect == "linuxcnc" or (self.dialect == "auto"
@@ -286,7 +322,8 @@ class _Reader:
         return CurveBlock(curve=finished.curve, location=finished.location, units=state.units,
                           eol=self.eol, incremental=state.incremental,
                           feed_word_after=None if finished.feed is None else finished.feed.word,
-                          feed_u=finished.feed_u, feed_mm_s=finished.feed_mm_s)
+                          feed_u=finished.feed_u, feed_mm_s=finished.feed_mm_s,
+                          semicolon_comments=self.dialect == "siemens")
 
 
 class _LookAhead:
@@ -319,6 +356,11 @@ class _LookAhead:
             self.ahead[0] = line
         else:
             self.ahead.popleft()
+
+
+def _code_part(line_text: str) -> str:
+    """A line without its comments: what precedes ';', with '(...)' removed."""
+    return re.sub(r"\([^)]*\)", "", line_text.split(";", 1)[0])
 
 
 def _line_ending(line_text: str) -> str:
