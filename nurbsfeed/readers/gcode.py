@@ -5,23 +5,30 @@ a pass-through line is yielded before the line after it is read, and only inside
 curve does the reader look ahead, point_lines.RUN_LINES lines at most, for a run of control
 points.
 
-Call chain for one line: `tokenizer.tokenize_line` (for a plain "K_ X_ Y_ Z_ [R_]" line inside
+Call chain for one line: `tokenizer.tokenize_line` (`siemens.tokenize_siemens_line` in a
+Sinumerik program; for a plain "K_ X_ Y_ Z_ [R_]" line inside
 a G06.2 curve, `fanuc.NurbsCurveReader.take_line` reads the text directly instead, with the same
 result, and `take_run` reads a whole run of such lines at once in compiled code, point_lines.py;
 `take_knot_line` reads a plain closing "K_" line the same way)
 -> if a NURBS block is open, its reader
-(`fanuc.NurbsCurveReader` or `linuxcnc.G52BlockReader`) takes the block, and the CurveBlock is
-yielded when the block completes, after the comment, blank and N-only lines read inside it (kept,
-in order, as one PassThrough: they come out right before the block's moves); a `%` inside a block
-is an error; otherwise `_start` decides whether the block opens a NURBS
-block, and if not `modal.ModalState.apply` executes it and the line passes through unchanged.
-Parameter assignments take effect after their line.
+(`fanuc.NurbsCurveReader`, `linuxcnc.G52BlockReader` or `siemens.BsplineReader`) takes the block,
+and the CurveBlock is yielded when the block completes, after the comment, blank and N-only lines
+read inside it (kept, in order, as one PassThrough: they come out right before the block's
+moves); a `%` inside a block is an error. A BSPLINE has no closing block: the block that ends it
+(a motion command, the program end) completes it and is then read as any other. Outside a block
+(`_outside`): a LinuxCNC G5 / G5.1 is a curve of its own (`linuxcnc_splines.read_spline`);
+otherwise `_start` decides whether the block opens a NURBS block, and if not
+`modal.ModalState.apply` executes it and the line passes through unchanged.
+Parameter assignments (numbered and named) take effect after their line.
 
-Dialect dispatch. `fanuc`: G06.2 curves (a Q word is an error, G5.2 is refused). `linuxcnc`: G5.2
-blocks and G6.2 curves with LinuxCNC's rules. `auto`: G5.2 is LinuxCNC; G6.2 is LinuxCNC when its
-first block has a Q word, Fanuc otherwise; a curve that continues a modal G6.2 follows the rules
-of the curve before it. Each curve is decided from what has been read up to its first block,
-never from lines after it.
+Dialect dispatch. `fanuc`: G06.2 curves (a Q word is an error, G5.2 is refused, G5 and G5.1
+are Fanuc's modes and pass through). `linuxcnc`: G5 / G5.1 splines, G5.2 blocks and G6.2 curves
+with LinuxCNC's rules. `siemens`: Sinumerik syntax and BSPLINE. `auto`: a .mpf / .spf file is
+Sinumerik, and so is the rest of a program from a line with BSPLINE on; G5 / G5.1 with X, Y, I
+or J is LinuxCNC's spline (Fanuc's G05 P10000, G05.1 Q1 have none); G5.2 is LinuxCNC; G6.2 is
+LinuxCNC when its first block has a Q word, Fanuc otherwise; a curve that continues a modal G6.2
+follows the rules of the curve before it. Each curve is decided from what has been read up to
+its first block, never from lines after it.
 
 Nothing is held but the modal state, the parameters, the lines looked ahead at (and, for
 `take_run`, one copy of them as ASCII codes) and the NURBS block being read (its control points,
