@@ -137,6 +137,6 @@ def read_spline(block: Block, state: ModalState, start: Word,
     after = {axis: AxisPos(end[axis], word.decimals) if word is not None else state.pos[axis]
              for axis, word in ends.items()}
     after["Z"] = state.pos["Z"]
-    exit_next = (-p_word.value, -q_word.value) if cubic and p_word and q_word else None
+    exit_next = None if p_word is None or q_word is None else (-p_word.value, -q_word.value)
     return (FinishedCurve(curve, location, feed_u, feed_mm_s,
                           {axis: after[axis] for axis in AXES}, feed, state.motion), exit_next)
