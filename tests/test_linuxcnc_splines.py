@@ -14,7 +14,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 
+from nurbsfeed.cli import main
 from nurbsfeed.errors import InputError
 from nurbsfeed.files import InputFile
 from nurbsfeed.machine import load_machine
@@ -204,3 +206,31 @@ def test_every_written_point_lies_on_the_spline(converted: dict[str, str], name:
         moved = polygon.copy()
         moved[1] += [0.0, 0.1]
         assert distance_to(moved, points).max() > ON_CURVE_MM
+
+
+# ---- through the command line: refused late, nothing written -----------------------------------
+LATE_ERRORS = [
+    ("late.ngc", PREAMBLE + "G5 X10. Y0. I3. J5. P-2. Q4.\nG18\nG5 X20. Y0. I3. J5. P-2. Q4.\n",
+     "5:1: G5 in plane G18: Splines must be in the XY plane (LinuxCNC); select G17 first"),
+    ("late.ngc", PREAMBLE + "G5.1 X10. Y10. I9. J0.\nG1 X#<x>\n",
+     "4:5: Named parameter #<x> not defined (LinuxCNC): assign it (#<x> = value) on an earlier "
+     "line"),
+    ("late.mpf", "N10 G17 G710 G90 G94\nN20 G1 X0. Y0. Z0. F600.\nN30 BSPLINE X5. Y10. PL=1.\n"
+     "N40 X15. Y12. PL=1.\nN50 X20. Y0. PL=1.\nN60 X30. Y5. PL=1.\nN70 ASPLINE X40. Y0.\n",
+     "7:5: ASPLINE (Akima spline) is not supported: nurbsfeed reads BSPLINE, whose control points "
+     "and knots make a NURBS"),
+]
+
+
+@pytest.mark.parametrize(("name", "program", "message"), LATE_ERRORS)
+def test_a_late_bad_block_is_located_exits_2_and_leaves_no_output(tmp_path: Path, name: str,
+                                                                  program: str,
+                                                                  message: str) -> None:
+    source = tmp_path / name
+    source.write_text(program)
+    out = tmp_path / "out.nc"
+    result = CliRunner().invoke(main, ["convert", str(source), "-o", str(out)],
+                                catch_exceptions=False)
+    assert result.exit_code == 2
+    assert result.stderr == f"{source}:{message}\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == [name]
