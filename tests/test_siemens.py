@@ -15,6 +15,7 @@ import pytest
 
 from nurbsfeed.errors import InputError
 from nurbsfeed.files import InputFile
+from nurbsfeed.gcode.siemens import tokenize_siemens_line
 from nurbsfeed.machine import load_machine
 from nurbsfeed.pipeline import convert_file
 from nurbsfeed.program import CurveBlock, PassThrough
@@ -197,3 +198,47 @@ def test_the_sample_passes_every_other_line_through_and_comments_with_semicolons
     assert not any(line.startswith("(") for line in out)
     assert out[out.index("N80 G1 Z-1. F600.") + 1].startswith("; nurbsfeed: curve 0 N90 ")
     assert out[out.index("N160 G1 X55. Y0.") - 1] == "F1500."
+
+
+# ---- the line syntax ------------------------------------------------------------------------
+@pytest.mark.parametrize(("line", "expected"), [
+    ("N10 G1 X=10.5 Y-2 F300 ; feed", [("N", 10.0), ("G", 1.0), ("X", 10.5), ("Y", -2.0),
+                                        ("F", 300.0)]),
+    (":100 x1.5y2", [("X", 1.5), ("Y", 2.0)]),
+    ("N20 T=\"EM 10\" M6 SOFT G642", [("N", 20.0), ("M", 6.0), ("G", 642.0)]),
+    ("N30 bspline sd=2 X1 PL=0.5 PW=2", [("N", 30.0), ("BSPLINE", 0.0), ("SD", 2.0),
+                                         ("X", 1.0), ("PL", 0.5), ("PW", 2.0)]),
+    ("N40 G710 G700 G71 G70", [("N", 40.0), ("G", 21.0), ("G", 20.0), ("G", 21.0), ("G", 20.0)]),
+    ("N50 G4 F2.5 S10", [("N", 50.0), ("G", 4.0)]),
+    ("N60 CYCLE832(0.01, _FINISH, 1) MSG(\"go\")", [("N", 60.0)]),
+])
+def test_sinumerik_lines_read_as_words(line: str, expected: list) -> None:
+    block = tokenize_siemens_line(line + "\n", 3, "t.mpf")
+    assert [(word.letter, word.value) for word in block.words] == expected
+
+
+def test_a_skip_block_is_read_as_executed_and_keeps_its_words() -> None:
+    block = tokenize_siemens_line("/1 N10 G0 X1.\n", 3, "t.mpf")
+    assert block.block_delete and [w.letter for w in block.words] == ["N", "G", "X"]
+
+
+@pytest.mark.parametrize(("line", "col", "message"), [
+    ("N10 G1.25 X1", 5, "G1.25 is not a valid G code: a whole number or one decimal from 0 to "
+                        "10000"),
+    ("N10 R1=5", 5, "'R1=' assigns an R parameter or a variable; nurbsfeed reads literal "
+                    "Sinumerik programs only (no R parameters, variables or expressions)"),
+    ("N10 X=R1", 5, "X has no number after it (found '=R1'); expressions, AC(), IC() and R "
+                    "parameters are not supported: write e.g. X=10.5"),
+    ("N10 TRAORI", 5, "'TRAORI' is not a Sinumerik command nurbsfeed reads: it reads words "
+                      "(X10.5, G1, F300), BSPLINE with SD, PL, PW, and BRISK, CFC, CFIN, CFTCP, "
+                      "COMPCAD, COMPCURV, COMPOF, COMPON, DRIVE, FFWOF, FFWON, FNORM, SOFT, "
+                      "SPATH, SUPA, UPATH"),
+    ("N10 WORKPIECE(,,,)", 5, "'WORKPIECE(...)' is not read by nurbsfeed (it reads CYCLE832, MSG "
+                              "calls, which change no position)"),
+    ("N10 G1 X1 @", 11, "unexpected character '@' (a Sinumerik word is an address and a number, "
+                        "e.g. X10.5)"),
+])
+def test_bad_sinumerik_lines_are_located(line: str, col: int, message: str) -> None:
+    with pytest.raises(InputError) as caught:
+        tokenize_siemens_line(line + "\n", 3, "t.mpf")
+    assert str(caught.value) == f"t.mpf:3:{col}: {message}"

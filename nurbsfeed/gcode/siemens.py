@@ -32,7 +32,8 @@ CSPLINE, BAUTO, BNAT, BTAN, EAUTO, ENAT, ETAN, PW, SD, PL)":
 - Not supported, refused at the word: ASPLINE, CSPLINE, BAUTO, BNAT, BTAN, EAUTO, ENAT, ETAN,
   POLY; AC()/IC() and other expressions; R parameters.
 
-The line syntax (`tokenize_siemens_line`): `;` comments, N and `:` block numbers, words as a letter
+The line syntax (`tokenize_siemens_line`): `;` comments, N and `:` block numbers, skip blocks
+(`/`, read as executed, as everywhere in nurbsfeed), words as a letter
 and a number with an optional `=` (`X10.5`, `X=10.5`), `SD=`, `PL=`, `PW=`, and the keywords and
 calls that change no position, unit, distance mode or feed (SOFT, FFWON, G642 ..., `MSG(...)`,
 `CYCLE832(...)`, `T="name"`). Anything else is refused at its column: a word the reader does not
@@ -59,7 +60,7 @@ from nurbsfeed.gcode.nurbs_block import (
     feed_steps,
     motion_words,
 )
-from nurbsfeed.gcode.tokenizer import Block, Word, decimals_written, printable
+from nurbsfeed.gcode.tokenizer import Block, Word, decimals_written, printable, valid_code
 
 SUFFIXES = (".mpf", ".spf")  # Sinumerik main programs and subprograms
 BSPLINE = "BSPLINE"
@@ -95,7 +96,10 @@ def tokenize_siemens_line(line_text: str, line: int, path: str) -> Block:
     else:
         eol, body = "", line_text
     words: list[Word] = []
-    pos = 0
+    pos = len(body) - len(body.lstrip(" \t\r"))
+    block_delete = body[pos:pos + 1] == "/"  # a skip block "/" or "/1".."/9": read as executed
+    if block_delete:
+        pos += 2 if body[pos + 1:pos + 2].isdigit() else 1
 
     def error(message: str, at: int) -> InputError:
         return InputError(message, Location(path, line, at + 1))
@@ -134,17 +138,24 @@ def tokenize_siemens_line(line_text: str, line: int, path: str) -> Block:
                         f"'{printable(body[pos + len(letter):pos + len(letter) + 8])}'); "
                         f"expressions, AC(), IC() and R parameters are not supported: write "
                         f"e.g. {letter}=10.5", pos)
+        if body[number.end():].lstrip(" \t\r").startswith("="):
+            raise error(f"'{body[pos:number.end()].strip()}=' assigns an R parameter or a "
+                        "variable; nurbsfeed reads literal Sinumerik programs only (no R "
+                        "parameters, variables or expressions)", pos)
         text = number.group(2)
         value = float(text)
         if not math.isfinite(value):
             raise error(f"{letter}{text} is too large to be a number", pos)
+        if letter in "GM" and not valid_code(value):
+            raise error(f"{letter}{text} is not a valid {letter} code: a whole number or one "
+                        "decimal from 0 to 10000", pos)
         if letter == "G" and round(value) in UNIT_CODES and value == round(value):
             value = UNIT_CODES[round(value)]
         words.append(Word(letter, value, text, decimals_written(text), line, pos + 1))
         pos = number.end()
     if any(word.letter == "G" and word.code == 40 for word in words):  # G4: F and S are the dwell
         words = [word for word in words if word.letter not in "FS"]
-    return Block(line, tuple(words), eol=eol)
+    return Block(line, tuple(words), block_delete=block_delete, eol=eol)
 
 
 def _keyword(body: str, pos: int, ident: re.Match[str], name: str, line: int,

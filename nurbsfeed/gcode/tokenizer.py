@@ -311,7 +311,7 @@ def _simple_words(body: str, line: int) -> tuple[Word, ...] | None:
         text = piece[1:]
         value = float(text)
         letter = piece[0].upper()
-        if not math.isfinite(value) or (letter in "GM" and not _valid_code(value)):
+        if not math.isfinite(value) or (letter in "GM" and not valid_code(value)):
             return None
         # tuple.__new__ is what Word._make calls, minus its checks: the fields are all here
         words.append(tuple.__new__(Word, (letter, value, text, decimals_written(text), line,
@@ -335,13 +335,13 @@ def _plain_words(body: str, line: int) -> tuple[Word, ...] | None:
         text = match.group(2) + match.group(3)
         value = float(text)
         upper = letter.upper()
-        if not math.isfinite(value) or (upper in "GM" and not _valid_code(value)):
+        if not math.isfinite(value) or (upper in "GM" and not valid_code(value)):
             return None
         words.append(Word(upper, value, text, decimals_written(text), line, match.start() + 1))
     return tuple(words)
 
 
-def _valid_code(value: float) -> bool:
+def valid_code(value: float) -> bool:
     """G and M numbers: 0 to CODE_LIMIT, at most one decimal."""
     return 0.0 <= value <= CODE_LIMIT and abs(value * 10 - round(value * 10)) <= 1e-6
 
@@ -387,7 +387,7 @@ def _scan_line(body: str, eol: str, line: int, path: str,
             letter = char.upper()
             scan.pos += 1
             value, text, decimals = scan.value(letter, start)
-            if letter in "GM" and not _valid_code(value):
+            if letter in "GM" and not valid_code(value):
                 example = "G6.2" if letter == "G" else "M30"
                 raise scan.error(f"{letter}{text} is not a valid {letter} code: a whole number "
                                  f"or one decimal from 0 to 10000 (e.g. {example})", start)
