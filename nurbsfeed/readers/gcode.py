@@ -165,7 +165,8 @@ class _Reader:
     def _tokenize(self, line_text: str, line: int) -> Block:
         """The line's words, in the syntax of the dialect; under `auto`, a BSPLINE makes the
         program a Sinumerik one from its line on (the lines before read the same in both)."""
-        if self.dialect == "auto" and _BSPLINE.search(_code_part(line_text)):
+        if (self.dialect == "auto" and ("PLINE" in line_text or "pline" in line_text)
+                and _BSPLINE.search(_code_part(line_text))):  # (a substring test first: fast)
             self.dialect = "siemens"
         if self.dialect == "siemens":
             return tokenize_siemens_line(line_text, line, self.path)
