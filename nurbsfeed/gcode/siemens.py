@@ -13,7 +13,8 @@ CSPLINE, BAUTO, BNAT, BTAN, EAUTO, ENAT, ETAN, PW, SD, PL)":
   ("check points"), not points of the curve. The curve starts at the current position and ends
   at the last control point, tangent to the control polygon at both ("The B spline is always
   tangential to the check polygon at its start and end points"): a clamped B-spline. It ends at
-  the next motion command (G0 G1 G2 G3 ...), at the program end (M2 M17 M30) or the file's end.
+  the next motion command (G0 G1 G2 G3 ...), at the program end (M2 M17 M30) or the file's end;
+  a BSPLINE programmed again inside it is refused (continue or restart: the manual does not say).
 - SD: the degree, 3 unless SD=2 is programmed (on the BSPLINE block; any other value is refused).
 - PW: the point weight of the control point in the same block, 0 <= PW <= 3 (the manual's
   range), 1 if omitted; PW=0 is refused here (the curve would not be a NURBS). The start point
@@ -223,8 +224,7 @@ class BsplineReader:
 
     def ends_at(self, block: Block) -> bool:
         """True when `block` ends the spline: another motion command, or the program's end."""
-        return bool(motion_words(block)) or bool(block.codes("M").keys() & PROGRAM_ENDS) \
-            or block.first(BSPLINE) is not None
+        return bool(motion_words(block)) or bool(block.codes("M").keys() & PROGRAM_ENDS)
 
     def take(self, block: Block) -> bool:
         """Read one control-point block (never the last: `ends_at` decides that)."""
@@ -237,6 +237,12 @@ class BsplineReader:
         allowed = POINT_WORDS | (OPENING_WORDS if opening else set())
         seen: set[str] = set()
         for word in block.words:
+            if word.letter == BSPLINE and not opening:
+                # whether a BSPLINE programmed again continues the spline or starts a new one
+                # at this point is not in the manual: refused rather than guessed
+                raise InputError(f"BSPLINE inside the BSPLINE started on line {self.start.line}: "
+                                 "end that one with G1 (or another motion command) first",
+                                 state.where(word))
             if word.letter in ("SD", "F") and not opening:
                 where = "the BSPLINE block" if word.letter == "SD" else \
                     "the BSPLINE block or before it (nurbsfeed plans one feed per spline)"
