@@ -4,4 +4,4 @@ whose positions are their codes in the stepping kernel (`interpolate.METHODS`), 
 dialects (`readers.gcode`)."""
 
 METHOD_NAMES = ("taylor1", "rk4", "rk2c")
-DIALECTS = ("auto", "fanuc", "linuxcnc")
+DIALECTS = ("auto", "fanuc", "linuxcnc", "siemens")

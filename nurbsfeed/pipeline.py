@@ -22,7 +22,13 @@ import numpy as np
 
 from nurbsfeed.errors import CurveError, InputError, Location
 from nurbsfeed.files import ENCODING, ERRORS, atomic_output
-from nurbsfeed.gcode.writer import MoveWriter, cycle_comment, rapid_line
+from nurbsfeed.gcode.writer import (
+    ZERO_LENGTH_COMMENT,
+    MoveWriter,
+    comment_line,
+    cycle_comment,
+    rapid_line,
+)
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.interpolate import PointChunk, Stepping
 from nurbsfeed.machine import FLOOR_MARGIN, Machine
@@ -257,13 +263,14 @@ def convert_block(block: CurveBlock, index: int, out: BinaryIO, machine: Machine
     if block.rapid_to_start:
         out.write(rapid_line(block.curve.points[0], machine.decimals, block.units).encode("ascii")
                   + eol)
-    out.write(cycle_comment(index, block.curve.name, n_points, period_s, method,
-                            plan.cycle_time_s, plan.length_mm,
-                            block.units).encode(ENCODING, ERRORS) + eol)
+    comment = cycle_comment(index, block.curve.name, n_points, period_s, method,
+                            plan.cycle_time_s, plan.length_mm, block.units)
+    out.write(comment_line(comment, block.semicolon_comments).encode(ENCODING, ERRORS) + eol)
     moving = not block.curve.is_degenerate and plan.n_periods > 0
     writer = None
     if not moving:
-        out.write(b"(nurbsfeed: zero-length curve, no move written)" + eol)
+        out.write(comment_line(ZERO_LENGTH_COMMENT, block.semicolon_comments).encode("ascii")
+                  + eol)
     else:
         if block.incremental:
             out.write(b"G90" + eol)

@@ -51,6 +51,7 @@ class CurveBlock:
     feed_u: np.ndarray = field(default_factory=lambda: np.empty(0))
     feed_mm_s: np.ndarray = field(default_factory=lambda: np.empty(0))
     lengths_in_mm: bool = False  # True once `in_mm` has converted curve and feed_mm_s
+    semicolon_comments: bool = False  # comments written "; ..." (Sinumerik reads no "( )")
 
     def in_mm(self) -> CurveBlock:
         """This block with its lengths in mm: the form every stage after reading takes. The

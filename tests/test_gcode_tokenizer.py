@@ -9,7 +9,14 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from nurbsfeed.errors import InputError
-from nurbsfeed.gcode.tokenizer import Block, Param, _scan_line, printable, tokenize_line
+from nurbsfeed.gcode.tokenizer import (
+    Block,
+    Param,
+    ParamKey,
+    _scan_line,
+    printable,
+    tokenize_line,
+)
 
 
 def words(line: str, params: dict[int, Param] | None = None) -> list[tuple[str, float, int]]:
@@ -78,7 +85,7 @@ def test_parameters_read_before_the_lines_own_assignments() -> None:
     block = tokenize_line("#1=10.5 #2 = -#1 X#1 Y-#1", 1, "t.nc", {1: Param(2.0, 1)})
     assert [(w.letter, w.value, w.decimals) for w in block.words] == [("X", 2.0, 1),
                                                                        ("Y", -2.0, 1)]
-    assert [(a.number, a.param, a.col) for a in block.assignments] == [
+    assert [(a.key, a.param, a.col) for a in block.assignments] == [
         (1, Param(10.5, 1), 1), (2, Param(-2.0, 1), 9)]
 
 
@@ -94,10 +101,23 @@ def test_parameters_read_before_the_lines_own_assignments() -> None:
                        "value as a number"),
     ("G1 X#7", 5, "#7 is used before it is assigned (write #7=value on an earlier line)"),
     ("#7", 1, "'#7' must be assigned (#7=value) or follow a letter (X#7)"),
-    ("#<depth>=1", 1, "'#' must be followed by a parameter number (#1=10.5, X#1); named "
-                      "(#<name>) and indirect (##1) parameters are not supported"),
-    ("G1 X##1", 5, "'#' must be followed by a parameter number (#1=10.5, X#1); named "
-                   "(#<name>) and indirect (##1) parameters are not supported"),
+    ("G1 X##1", 5, "'#' must be followed by a parameter number or a name in <> (#1=10.5, "
+                   "X#1, #<depth>=2.5); indirect (##1) parameters are not supported"),
+    ("G1 Z-#<depth>", 5, "Named parameter #<depth> not defined (LinuxCNC): assign it "
+                         "(#<depth> = value) on an earlier line"),
+    ("G1 F#<Feed Rate>", 5, "Named parameter #<feedrate> not defined (LinuxCNC): assign it "
+                            "(#<feedrate> = value) on an earlier line"),
+    ("#<depth>", 1, "'#<depth>' must be assigned (#<depth>=value) or follow a letter "
+                    "(X#<depth>)"),
+    ("#<depth=1", 1, "'#<' starts a named parameter but no '>' closes its name on this line "
+                     "(write #<depth>)"),
+    ("G1 X#<depth", 5, "'#<' starts a named parameter but no '>' closes its name on this line "
+                       "(write #<depth>)"),
+    ("#<>=1", 1, "'#<>' is not a parameter name: a name is letters, digits and '_' between < "
+                 "and > (#<depth>, #<_safe_z>)"),
+    ("#<a-b>=1", 1, "'#<a-b>' is not a parameter name: a name is letters, digits and '_' "
+                    "between < and > (#<depth>, #<_safe_z>)"),
+    ("#<depth>=[1+1]", 10, "expressions in [...] are not supported; write the value as a number"),
     ("#1=", 1, "#1= has no number after it (found the end of the line); write e.g. #1=10.5"),
     ("WHILE [#1 LT 3] DO1", 1, "'WHILE' starts a macro or O-word statement; nurbsfeed reads "
                                "literal G-code only (no subroutines, IF/WHILE/GOTO or "
@@ -123,6 +143,22 @@ def test_bad_lines(line: str, col: int, message: str) -> None:
     with pytest.raises(InputError) as caught:
         tokenize_line(line + "\n", 4, "dir/t.nc", {})
     assert str(caught.value) == f"dir/t.nc:4:{col}: {message}"
+
+
+def test_named_parameters_are_case_insensitive_and_read_before_the_lines_assignments() -> None:
+    params: dict[ParamKey, Param] = {"depth": Param(2.5, 1), "_safez": Param(5.0, None)}
+    block = tokenize_line("#<Depth> = 3 G1 Z-#<DEPTH> F#<_Safe Z>\n", 1, "t.nc", params)
+    assert [(w.letter, w.value, w.text, w.col) for w in block.words] == [
+        ("G", 1.0, "1", 14), ("Z", -2.5, "-#<depth>", 17), ("F", 5.0, "#<_safez>", 28)]
+    assert block.words[1].decimals == 1
+    assert [(a.key, a.param, a.col) for a in block.assignments] == [("depth", Param(3.0, None), 1)]
+
+
+def test_named_and_numbered_parameters_are_separate() -> None:
+    block = tokenize_line("#<1>=4 #1=7 X#1 Y#<1>\n", 1, "t.nc",
+                          {1: Param(1.0, None), "1": Param(2.0, None)})
+    assert [(w.letter, w.value) for w in block.words] == [("X", 1.0), ("Y", 2.0)]
+    assert [a.key for a in block.assignments] == ["1", 1]
 
 
 def test_printable_escapes_undecodable_bytes_and_controls() -> None:

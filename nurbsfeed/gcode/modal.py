@@ -52,11 +52,13 @@ OTHER_PLANES = {171, 181, 191}  # G17.1 G18.1 G19.1 (UV, WU, VW)
 CUTTER_COMP_ON = {410, 420, 411, 421}
 FEED_MODES = {930: "inverse time", 940: "per minute", 950: "per revolution"}
 REFERENCE_RETURN = {280, 300}  # G28 G30
-NAMED_AXES_LOST = {530, 310, 270, 290}  # G53 G31 G27 G29
+NAMED_AXES_LOST = {530, 310, 270, 290, 1530}  # G53 G31 G27 G29, Sinumerik G153
 TOOL_LENGTH = {430, 431, 432, 440, 490}
 # All axes lost, then the block's own axis words move in the new frame ("G0 G54 X0. Y0.").
 FRAME_SELECT = {540, 550, 560, 570, 580, 590, 591, 592, 593, 541, 921, 922, 923, 690, 500,
                 501, 434, 435}  # G54-G59.3 G54.1 G92.1-G92.3 G69 G50 G50.1 G43.4 G43.5
+# Sinumerik: G500 and the settable frames G505-G599 change the frame too
+FRAME_SELECT |= {5000} | set(range(5050, 6000, 10))
 M_FRAME_SELECT = {60, 980, 990}  # M6 M98 M99
 # All axes lost; the block's axis words are arguments, not a move (G10 L2 P1 X0, G68 X0 Y0 R45).
 FRAME_ARGUMENTS = {100, 520, 680, 682, 510, 511, 650, 660, 661}
@@ -68,6 +70,7 @@ NOT_SUPPORTED = {
 DWELL = 40  # G4: its X or P word is the dwell time, not a position
 NO_POSITION_EFFECT = ({70, 80, 90, 150, 131, 200, 210, 400, 610, 611, 640, 670, 800, 900, 910,
                        901, 911, 960, 970, 980, 990}
+                      | {600, 6010, 6020, 6030, 6410, 6420, 6430, 6440, 6450}  # Sinumerik G60x G64x
                       | set(PLANES) | OTHER_PLANES | CUTTER_COMP_ON | set(FEED_MODES))
 KNOWN_G = (GROUP1_MOVES | SPLINES | PROBES | CYCLES | REFERENCE_RETURN | NAMED_AXES_LOST
            | TOOL_LENGTH | FRAME_SELECT | FRAME_ARGUMENTS | NO_POSITION_EFFECT | {920, DWELL})
@@ -173,14 +176,18 @@ class ModalState:
     # ---- executing a block -------------------------------------------------------------------
     def apply_feed(self, word: Word) -> FeedWord:
         """A new modal F; F must not be negative (F0 is legal on rapid-only programs)."""
+        self.feed = self.feed_from(word)
+        return self.feed
+
+    def feed_from(self, word: Word) -> FeedWord:
+        """The modal F an F word sets, checked, without setting it."""
         if word.value < 0:
             raise InputError(f"{word.name}: a feed must not be negative", self.where(word))
         # restored after our moves, so written our way: with a decimal point (F60 -> F60.),
         # a parameter as its value; a value already written with a point is kept as written
         plain = "." in word.text and "#" not in word.text
         text = word.name if plain else "F" + format_value(word.value)
-        self.feed = FeedWord(word.value, text)
-        return self.feed
+        return FeedWord(word.value, text)
 
     def apply(self, block: Block) -> None:
         """Execute one block that is not part of a NURBS block (parse -> check -> execute)."""

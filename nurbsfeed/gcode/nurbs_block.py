@@ -21,7 +21,7 @@ from nurbsfeed.gcode.modal import (
     ModalState,
     format_value,
 )
-from nurbsfeed.gcode.tokenizer import Block, Word
+from nurbsfeed.gcode.tokenizer import Block, Word, param_label
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.geometry.nurbs import MAX_DEGREE, far_control_point, far_message
 
@@ -72,8 +72,8 @@ def motion_words(block: Block) -> list[Word]:
 def check_no_assignments(block: Block, state: ModalState) -> None:
     """A NURBS block is replaced by G1 moves, so an assignment inside it would be lost."""
     if block.assignments:
-        raise InputError(f"#{block.assignments[0].number}= inside a NURBS block: the block is "
-                         "replaced by G1 moves, so assign parameters before it",
+        raise InputError(f"{param_label(block.assignments[0].key)}= inside a NURBS block: the "
+                         "block is replaced by G1 moves, so assign parameters before it",
                          Location(state.path, block.line, block.assignments[0].col))
 
 

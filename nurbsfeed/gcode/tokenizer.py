@@ -12,11 +12,16 @@ The lexical rules, shared by Fanuc and LinuxCNC programs:
 - Comments: `( ... )` anywhere, `;` to the end of the line.
 - `%` alone at the start of a line is the program delimiter; the line has no words.
 - `/` (optionally `/1`..`/9`, Fanuc optional block skip) as the first character: block delete.
-- Literal numbered parameters: `#1=10.5` (or `#1=#2`) assigns, `X#1` / `F#1` / `X-#1` reads. As in
-  the LinuxCNC interpreter, assignments on a line take effect after the whole line is read, so
-  `#1=5 X#1` reads the value #1 had before the line. Reading a parameter that was never assigned
-  is an error (LinuxCNC would read 0, Fanuc <vacant>: both are almost always a mistake here).
-- Not supported, each with its own message: expressions `[...]`, named parameters `#<name>`,
+- Literal parameters, numbered or named: `#1=10.5` (or `#1=#2`), `#<depth> = 2.5`,
+  `#<_safe_z> = 5` assign; `X#1` / `F#1` / `X-#1` / `Z-#<depth>` read. Named parameters are
+  LinuxCNC's: the name is case-insensitive and spaces inside it do not count (the interpreter
+  reads `#<Safe Z>` as `#<safez>`); a leading `_` makes a global, which outside subroutines (not
+  read here) is the same as a local. As in the LinuxCNC interpreter, assignments on a line take
+  effect after the whole line is read, so `#1=5 X#1` reads the value #1 had before the line.
+  Reading a parameter that was never assigned is an error: for a named one LinuxCNC's own
+  ("Named parameter #<depth> not defined"); for a numbered one LinuxCNC would read 0 and Fanuc
+  <vacant>, both almost always a mistake here.
+- Not supported, each with its own message: expressions `[...]`, indirect parameters `##1`,
   macro / O-word statements (IF, WHILE, GOTO, `o100 sub`, ...).
 
 Values are checked here once: finite, and for G and M at most one decimal (`G06.2` == `G6.2`,
@@ -36,8 +41,11 @@ from nurbsfeed.errors import InputError, Location
 _SPACE = "[ \t\r]"  # the spaces between words (a lone CR inside a line is one)
 _DIGITS = r"(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)"  # ASCII only: \d would take any script's digits
 _NUMBER = re.compile(rf"[+-]?{_SPACE}*{_DIGITS}")
-_PARAM_REF = re.compile(rf"([+-]?){_SPACE}*#{_SPACE}*([0-9]+)")
-_ASSIGN = re.compile(rf"#{_SPACE}*([0-9]+){_SPACE}*=")
+# a parameter: numbered (#12) or named (#<depth>), the name up to the first '>'
+_PARAMETER = rf"#{_SPACE}*(?:([0-9]+)|<([^>]*)>)"
+_PARAM_REF = re.compile(rf"([+-]?){_SPACE}*{_PARAMETER}")
+_ASSIGN = re.compile(rf"{_PARAMETER}{_SPACE}*=")
+_NAME = re.compile(r"[A-Za-z0-9_.]+")
 _LETTER_RUN = re.compile(r"[A-Za-z]{2,}")
 _FUNCTION = re.compile(rf"([A-Za-z]{{2,}}){_SPACE}*\[")
 # The fast paths: a line of words separated by single spaces (what posts write), then a line of
@@ -55,8 +63,8 @@ KEYWORDS = frozenset({
     "SUB", "ENDSUB", "CALL", "RETURN", "REPEAT", "ENDREPEAT", "BREAK", "CONTINUE",
     "POPEN", "PCLOS", "DPRNT", "BPRNT", "SETVN",
 })
-BAD_PARAMETER = ("'#' must be followed by a parameter number (#1=10.5, X#1); named (#<name>) "
-                 "and indirect (##1) parameters are not supported")
+BAD_PARAMETER = ("'#' must be followed by a parameter number or a name in <> (#1=10.5, X#1, "
+                 "#<depth>=2.5); indirect (##1) parameters are not supported")
 PARAMETER_LIMIT = 999999  # above the highest numbered parameter of any controller (Fanuc #100000s)
 CODE_LIMIT = 10000.0  # G and M numbers above this are typos, and would overflow `code`
 
@@ -94,11 +102,19 @@ class Word(NamedTuple):
         return f"{self.letter}{self.text}"
 
 
+ParamKey = int | str  # 12 for #12, "depth" for #<depth> (lower case, spaces removed)
+
+
+def param_label(key: ParamKey) -> str:
+    """12 -> "#12", "depth" -> "#<depth>": a parameter as a message names it."""
+    return f"#{key}" if isinstance(key, int) else f"#<{key}>"
+
+
 @dataclass(frozen=True)
 class Assignment:
-    """`#number=value` on a line, applied after the line is read."""
+    """`#number=value` or `#<name>=value` on a line, applied after the line is read."""
 
-    number: int
+    key: ParamKey
     param: Param
     col: int
 
@@ -161,7 +177,8 @@ def decimals_written(text: str) -> int | None:
 class _Scanner:
     """Walks one line's body; every error names the column where the scanner stands."""
 
-    def __init__(self, body: str, line: int, path: str, params: Mapping[int, Param]) -> None:
+    def __init__(self, body: str, line: int, path: str, params: Mapping[ParamKey, Param]
+                 ) -> None:
         self.body = body
         self.line = line
         self.path = path
@@ -195,6 +212,25 @@ class _Scanner:
             raise self.error(f"#{shown}: parameter numbers go from 0 to {PARAMETER_LIMIT}", pos)
         return int(stripped)
 
+    def bad_parameter(self) -> InputError:
+        """The error for a '#' that starts no parameter the reader knows."""
+        if re.match(rf"#{_SPACE}*<", self.body[self.pos:]):
+            return self.error("'#<' starts a named parameter but no '>' closes its name on this "
+                              "line (write #<depth>)")
+        return self.error(BAD_PARAMETER)
+
+    def parameter_key(self, number: str | None, name: str, pos: int) -> ParamKey:
+        """The parameter `#number` or `#<name>` (as `_PARAMETER` splits it) names: its number,
+        or its name normalised as the LinuxCNC interpreter does (spaces removed, lower case)."""
+        if number is not None:
+            return self.parameter_number(number, pos)
+        key = re.sub(_SPACE, "", name).lower()
+        if not _NAME.fullmatch(key):
+            shown = printable(name if len(name) <= 24 else name[:20] + "...")
+            raise self.error(f"'#<{shown}>' is not a parameter name: a name is letters, digits "
+                             "and '_' between < and > (#<depth>, #<_safe_z>)", pos)
+        return key
+
     def value(self, owner: str, owner_pos: int) -> tuple[float, str, int | None]:
         """A number or a parameter read after a letter (or after `#n=`): value, text, decimals."""
         self.skip_spaces()
@@ -210,16 +246,21 @@ class _Scanner:
                              "G-code only (no subroutines, IF/WHILE/GOTO or expressions)")
         ref = _PARAM_REF.match(self.body, self.pos)
         if ref:
-            number = self.parameter_number(ref.group(2), self.body.index("#", ref.start()))
-            if number not in self.params:
-                raise self.error(f"#{number} is used before it is assigned (write #{number}="
+            key = self.parameter_key(ref.group(2), ref.group(3),
+                                     self.body.index("#", ref.start()))
+            label = param_label(key)
+            if key not in self.params:
+                if isinstance(key, str):
+                    raise self.error(f"Named parameter {label} not defined (LinuxCNC): assign it "
+                                     f"({label} = value) on an earlier line")
+                raise self.error(f"{label} is used before it is assigned (write {label}="
                                  "value on an earlier line)")
-            param = self.params[number]
+            param = self.params[key]
             self.pos = ref.end()
             sign = -1.0 if ref.group(1) == "-" else 1.0
-            return sign * param.value, f"{ref.group(1)}#{number}", param.decimals
+            return sign * param.value, f"{ref.group(1)}{label}", param.decimals
         if self.peek() == "#":
-            raise self.error(BAD_PARAMETER)
+            raise self.bad_parameter()
         if self.peek().isdigit() and not self.peek().isascii():
             raise self.error(f"'{printable(self.peek())}' is not one of the digits 0-9 "
                              "(full-width and other scripts' digits are not G-code numbers)")
@@ -237,7 +278,7 @@ class _Scanner:
 
 
 def tokenize_line(line_text: str, line: int, path: str,
-                  params: Mapping[int, Param]) -> Block:
+                  params: Mapping[ParamKey, Param]) -> Block:
     """Split one line (with or without its line ending) into a Block.
 
     `params` are the parameter values before this line; the line's own assignments are returned
@@ -270,7 +311,7 @@ def _simple_words(body: str, line: int) -> tuple[Word, ...] | None:
         text = piece[1:]
         value = float(text)
         letter = piece[0].upper()
-        if not math.isfinite(value) or (letter in "GM" and not _valid_code(value)):
+        if not math.isfinite(value) or (letter in "GM" and not valid_code(value)):
             return None
         # tuple.__new__ is what Word._make calls, minus its checks: the fields are all here
         words.append(tuple.__new__(Word, (letter, value, text, decimals_written(text), line,
@@ -294,19 +335,19 @@ def _plain_words(body: str, line: int) -> tuple[Word, ...] | None:
         text = match.group(2) + match.group(3)
         value = float(text)
         upper = letter.upper()
-        if not math.isfinite(value) or (upper in "GM" and not _valid_code(value)):
+        if not math.isfinite(value) or (upper in "GM" and not valid_code(value)):
             return None
         words.append(Word(upper, value, text, decimals_written(text), line, match.start() + 1))
     return tuple(words)
 
 
-def _valid_code(value: float) -> bool:
+def valid_code(value: float) -> bool:
     """G and M numbers: 0 to CODE_LIMIT, at most one decimal."""
     return 0.0 <= value <= CODE_LIMIT and abs(value * 10 - round(value * 10)) <= 1e-6
 
 
 def _scan_line(body: str, eol: str, line: int, path: str,
-               params: Mapping[int, Param]) -> Block:
+               params: Mapping[ParamKey, Param]) -> Block:
     """The full reader of one line: parameters, block delete, `%`, and every error message."""
     scan = _Scanner(body, line, path, params)
     scan.skip_spaces()
@@ -346,7 +387,7 @@ def _scan_line(body: str, eol: str, line: int, path: str,
             letter = char.upper()
             scan.pos += 1
             value, text, decimals = scan.value(letter, start)
-            if letter in "GM" and not _valid_code(value):
+            if letter in "GM" and not valid_code(value):
                 example = "G6.2" if letter == "G" else "M30"
                 raise scan.error(f"{letter}{text} is not a valid {letter} code: a whole number "
                                  f"or one decimal from 0 to 10000 (e.g. {example})", start)
@@ -356,13 +397,15 @@ def _scan_line(body: str, eol: str, line: int, path: str,
             if not assign:
                 ref = _PARAM_REF.match(body, start)
                 if ref:
-                    raise scan.error(f"'#{ref.group(2)}' must be assigned (#{ref.group(2)}="
-                                     f"value) or follow a letter (X#{ref.group(2)})")
-                raise scan.error(BAD_PARAMETER)
+                    shown = f"#{ref.group(2)}" if ref.group(2) is not None \
+                        else f"#<{printable(ref.group(3))}>"
+                    raise scan.error(f"'{shown}' must be assigned ({shown}=value) or follow a "
+                                     f"letter (X{shown})")
+                raise scan.bad_parameter()
             scan.pos = assign.end()
-            number = scan.parameter_number(assign.group(1), start)
-            value, _, decimals = scan.value(f"#{number}=", start)
-            assignments.append(Assignment(number, Param(value, decimals), start + 1))
+            key = scan.parameter_key(assign.group(1), assign.group(2), start)
+            value, _, decimals = scan.value(f"{param_label(key)}=", start)
+            assignments.append(Assignment(key, Param(value, decimals), start + 1))
         elif char == "[":
             raise scan.error("expressions in [...] are not supported; write the value as a "
                              "number")

@@ -36,6 +36,7 @@ from nurbsfeed.program import MM_PER_UNIT
 
 FEED_SIGNIFICANT_DIGITS = 5
 FEED_MAX_DECIMALS = 6
+ZERO_LENGTH_COMMENT = "(nurbsfeed: zero-length curve, no move written)"
 CHUNK_POINTS = 65536  # points formatted per call: bounds the text buffer
 _BYTES_PER_LINE = 4 + 3 * 23 + 24 + 2
 
@@ -395,3 +396,9 @@ def cycle_comment(curve_index: int, name: str, n_points: int, period_s: float, m
             f"{period_s * 1e3:g} ms, {method}, length {length_mm / MM_PER_UNIT[units]:.3f} "
             f"{units}, "
             f"planned cycle {cycle_s:.3f} s)")
+
+
+def comment_line(text: str, semicolon: bool) -> str:
+    """A comment "(text)" as written: unchanged, or "; text" for a program whose controller
+    reads only ';' comments (Sinumerik)."""
+    return f"; {text[1:-1]}" if semicolon else text

@@ -5,23 +5,30 @@ a pass-through line is yielded before the line after it is read, and only inside
 curve does the reader look ahead, point_lines.RUN_LINES lines at most, for a run of control
 points.
 
-Call chain for one line: `tokenizer.tokenize_line` (for a plain "K_ X_ Y_ Z_ [R_]" line inside
+Call chain for one line: `tokenizer.tokenize_line` (`siemens.tokenize_siemens_line` in a
+Sinumerik program; for a plain "K_ X_ Y_ Z_ [R_]" line inside
 a G06.2 curve, `fanuc.NurbsCurveReader.take_line` reads the text directly instead, with the same
 result, and `take_run` reads a whole run of such lines at once in compiled code, point_lines.py;
 `take_knot_line` reads a plain closing "K_" line the same way)
 -> if a NURBS block is open, its reader
-(`fanuc.NurbsCurveReader` or `linuxcnc.G52BlockReader`) takes the block, and the CurveBlock is
-yielded when the block completes, after the comment, blank and N-only lines read inside it (kept,
-in order, as one PassThrough: they come out right before the block's moves); a `%` inside a block
-is an error; otherwise `_start` decides whether the block opens a NURBS
-block, and if not `modal.ModalState.apply` executes it and the line passes through unchanged.
-Parameter assignments take effect after their line.
+(`fanuc.NurbsCurveReader`, `linuxcnc.G52BlockReader` or `siemens.BsplineReader`) takes the block,
+and the CurveBlock is yielded when the block completes, after the comment, blank and N-only lines
+read inside it (kept, in order, as one PassThrough: they come out right before the block's
+moves); a `%` inside a block is an error. A BSPLINE has no closing block: the block that ends it
+(a motion command, the program end) completes it and is then read as any other. Outside a block
+(`_outside`): a LinuxCNC G5 / G5.1 is a curve of its own (`linuxcnc_splines.read_spline`);
+otherwise `_start` decides whether the block opens a NURBS block, and if not
+`modal.ModalState.apply` executes it and the line passes through unchanged.
+Parameter assignments (numbered and named) take effect after their line.
 
-Dialect dispatch. `fanuc`: G06.2 curves (a Q word is an error, G5.2 is refused). `linuxcnc`: G5.2
-blocks and G6.2 curves with LinuxCNC's rules. `auto`: G5.2 is LinuxCNC; G6.2 is LinuxCNC when its
-first block has a Q word, Fanuc otherwise; a curve that continues a modal G6.2 follows the rules
-of the curve before it. Each curve is decided from what has been read up to its first block,
-never from lines after it.
+Dialect dispatch. `fanuc`: G06.2 curves (a Q word is an error, G5.2 is refused, G5 and G5.1
+are Fanuc's modes and pass through). `linuxcnc`: G5 / G5.1 splines, G5.2 blocks and G6.2 curves
+with LinuxCNC's rules. `siemens`: Sinumerik syntax and BSPLINE. `auto`: a .mpf / .spf file is
+Sinumerik, and so is the rest of a program from a line with BSPLINE on; G5 / G5.1 with X, Y, I
+or J is LinuxCNC's spline (Fanuc's G05 P10000, G05.1 Q1 have none); G5.2 is LinuxCNC; G6.2 is
+LinuxCNC when its first block has a Q word, Fanuc otherwise; a curve that continues a modal G6.2
+follows the rules of the curve before it. Each curve is decided from what has been read up to
+its first block, never from lines after it.
 
 Nothing is held but the modal state, the parameters, the lines looked ahead at (and, for
 `take_run`, one copy of them as ASCII codes) and the NURBS block being read (its control points,
@@ -32,6 +39,7 @@ number of lines.
 from __future__ import annotations
 
 import itertools
+import re
 from collections import deque
 from collections.abc import Iterator
 from pathlib import Path
@@ -42,10 +50,26 @@ from nurbsfeed.files import BOM
 from nurbsfeed.gcode import point_lines
 from nurbsfeed.gcode.fanuc import NurbsCurveReader, stray_knot
 from nurbsfeed.gcode.linuxcnc import G52BlockReader
-from nurbsfeed.gcode.modal import AXES, G5_2, G5_3, G6_2, NO_POSITION_EFFECT, ModalState
+from nurbsfeed.gcode.linuxcnc_splines import G5, G5_1, is_spline_block, read_spline
+from nurbsfeed.gcode.modal import (
+    AXES,
+    G5_2,
+    G5_3,
+    G6_2,
+    GROUP1_MOVES,
+    NO_POSITION_EFFECT,
+    PROBES,
+    SPLINES,
+    ModalState,
+)
 from nurbsfeed.gcode.nurbs_block import FinishedCurve, first_word, motion_words
-from nurbsfeed.gcode.tokenizer import Block, Param, tokenize_line
+from nurbsfeed.gcode.siemens import BSPLINE, SUFFIXES, BsplineReader, tokenize_siemens_line
+from nurbsfeed.gcode.tokenizer import Block, Param, ParamKey, Word, code_name, tokenize_line
 from nurbsfeed.program import CurveBlock, PassThrough, ProgramItem
+
+G1 = 10
+_BSPLINE = re.compile(r"\bBSPLINE\b", re.IGNORECASE)
+MOTION_CODES = GROUP1_MOVES | PROBES | SPLINES | {G5_2, G6_2}
 
 
 def read_gcode(path: Path, lines: Iterator[str], dialect: str = "auto"
@@ -60,7 +84,9 @@ def read_gcode(path: Path, lines: Iterator[str], dialect: str = "auto"
     reaches it; an unknown dialect is refused at once.
     """
     if dialect not in DIALECTS:
-        raise InputError(f"unknown G-code dialect '{dialect}' (use auto, fanuc or linuxcnc)")
+        raise InputError(f"unknown G-code dialect '{dialect}' (use {', '.join(DIALECTS)})")
+    if dialect == "auto" and path.suffix.lower() in SUFFIXES:
+        dialect = "siemens"
     return _Reader(str(path), dialect).items(lines)
 
 
@@ -71,11 +97,15 @@ class _Reader:
         self.path = path
         self.dialect = dialect
         self.state = ModalState(path)
-        self.params: dict[int, Param] = {}
-        self.open: NurbsCurveReader | G52BlockReader | None = None
+        self.params: dict[ParamKey, Param] = {}
+        self.open: NurbsCurveReader | G52BlockReader | BsplineReader | None = None
+        self.g70: Word | None = None  # Sinumerik G70 in force (siemens.py)
         self.eol = "\n"
         self.last_curve: NurbsCurveReader | None = None  # the modal G6.2 curve's rules
         self.kept: list[str] = []  # the inert lines inside the open block, yielded before it
+        self.g5_exit: tuple[float, float] | None = None  # -P -Q of a G5 that ends here
+        # the last G5 / G5.1 and the motion mode it left in force, while that is not G1
+        self.spline_after: tuple[Word, int] | None = None
 
     def items(self, lines: Iterator[str]) -> Iterator[ProgramItem]:
         ahead = _LookAhead(lines)
@@ -108,7 +138,7 @@ class _Reader:
                     if closed:
                         yield from self._close()
                     continue
-            block = tokenize_line(line_text, line, self.path, self.params)
+            block = self._tokenize(line_text, line)
             if self.open is not None:
                 if block.delimiter:
                     body = line_text.rstrip("\r\n")
@@ -118,19 +148,54 @@ class _Reader:
                                               len(body) - len(body.lstrip(" \t\r")) + 1))
                 if block.is_inert:  # a comment, blank or N-only line: kept, in order
                     self.kept.append(line_text)
+                elif isinstance(self.open, BsplineReader) and self.open.ends_at(block):
+                    yield from self._close()  # then the block that ends it, as any other
+                    yield from self._outside(block, line_text)
                 elif self.open.take(block):
                     yield from self._close()
             else:
-                self.open = self._start(block)
-                if self.open is None:
-                    self.state.apply(block)
-                    yield PassThrough(line_text)
-                else:
-                    self.eol = block.eol or _line_ending(line_text)
+                yield from self._outside(block, line_text)
             for assignment in block.assignments:
-                self.params[assignment.number] = assignment.param
-        if self.open is not None:
+                self.params[assignment.key] = assignment.param
+        if isinstance(self.open, BsplineReader):  # a modal BSPLINE ends with the program
+            yield from self._close()
+        elif self.open is not None:
             raise self.open.unfinished()
+
+    def _tokenize(self, line_text: str, line: int) -> Block:
+        """The line's words, in the syntax of the dialect; under `auto`, a BSPLINE makes the
+        program a Sinumerik one from its line on (the lines before read the same in both)."""
+        if (self.dialect == "auto" and ("PLINE" in line_text or "pline" in line_text)
+                and _BSPLINE.search(_code_part(line_text))):  # (a substring test first: fast)
+            self.dialect = "siemens"
+        if self.dialect == "siemens":
+            return tokenize_siemens_line(line_text, line, self.path)
+        return tokenize_line(line_text, line, self.path, self.params)
+
+    def _outside(self, block: Block, line_text: str) -> Iterator[ProgramItem]:
+        """A block outside any NURBS block: a G5 / G5.1 curve, the start of a NURBS block, or
+        a line that passes through once executed."""
+        spline = self._spline_word(block)
+        if spline is not None:
+            self.eol = block.eol or _line_ending(line_text)
+            yield self._spline(block, spline)
+            return
+        self.open = self._start(block)
+        if self.open is None:
+            self._check_after_spline(block)
+            if self.dialect == "siemens":
+                self._units_word(block)
+            self.state.apply(block)
+            self._moved(block)
+            yield PassThrough(line_text)
+        else:
+            self.eol = block.eol or _line_ending(line_text)
+
+    def _units_word(self, block: Block) -> None:
+        """Sinumerik G70 (inch, F in the machine's unit) until G700 / G71 / G710."""
+        for word in block.words:
+            if word.letter == "G" and word.code in (200, 210):
+                self.g70 = word if word.text.rstrip(".") == "70" else None
 
     def _take_run(self, ahead: _LookAhead, line: int) -> int:
         """`NurbsCurveReader.take_run` on the next lines (line number `line` on), at most
@@ -150,6 +215,50 @@ class _Reader:
         ahead.drop(n)
         return n
 
+    def _spline_word(self, block: Block) -> Word | None:
+        """The G5 / G5.1 word of a LinuxCNC spline block, or None (module docstring)."""
+        if self.dialect in ("fanuc", "siemens"):
+            return None
+        g = block.codes("G")
+        for code in (G5, G5_1):
+            if code in g and is_spline_block(block, code):
+                return g[code]
+        return None
+
+    def _spline(self, block: Block, start: Word) -> CurveBlock:
+        """The CurveBlock of one G5 / G5.1 block (linuxcnc_splines.py)."""
+        before = self.state.motion
+        finished, self.g5_exit = read_spline(block, self.state, start, self.g5_exit)
+        if before not in (None, G1):
+            self.spline_after = (start, before)
+        return self._curve_block(finished)
+
+    def _check_after_spline(self, block: Block) -> None:
+        """After a G5 / G5.1 in a motion mode other than G1, a block of axis words only moves
+        in that mode for LinuxCNC, but in G1 after the moves written in place of the spline:
+        refused (linuxcnc_splines.py)."""
+        if self.spline_after is None:
+            return
+        if block.codes("G").keys() & MOTION_CODES:
+            self.spline_after = None
+            return
+        axes = [word for word in block.words if word.letter in AXES]
+        if axes and all(word.code in NO_POSITION_EFFECT for word in block.words
+                        if word.letter == "G"):
+            spline, mode = self.spline_after
+            raise InputError(f"{axes[0].name} without a G code after the {spline.name} on line "
+                             f"{spline.line}: LinuxCNC moves it in {code_name('G', mode)}, the "
+                             f"mode before the spline, but the G1 moves written in place of the "
+                             f"spline leave G1 in force: write {code_name('G', mode)} on this "
+                             "line", self.state.where(axes[0]))
+
+    def _moved(self, block: Block) -> None:
+        """A pass-through block with G codes or axis words ends a run of G5 splines: the next
+        G5 needs its own I and J."""
+        if self.g5_exit is not None and any(word.letter == "G" or word.letter in AXES
+                                            for word in block.words):
+            self.g5_exit = None
+
     def _close(self) -> Iterator[ProgramItem]:
         """The kept lines of the block just completed, then its CurveBlock."""
         assert self.open is not None, "called when a block completes"
@@ -159,11 +268,16 @@ class _Reader:
             self.kept = []
         yield self._curve_block(finished)
         self.open = None
+        self.g5_exit = None
+        self.spline_after = None
 
-    def _start(self, block: Block) -> NurbsCurveReader | G52BlockReader | None:
+    def _start(self, block: Block) -> NurbsCurveReader | G52BlockReader | BsplineReader | None:
         """The reader of the NURBS block this block opens, or None for an ordinary block."""
         g = block.codes("G")
         state = self.state
+        if self.dialect == "siemens":
+            bspline = block.first(BSPLINE)
+            return None if bspline is None else BsplineReader(block, state, bspline, self.g70)
         if G6_2 in g:
             question = block.first("Q")
             linuxcnc = self.dialect == "linuxcnc" or (self.dialect == "auto"
@@ -216,7 +330,8 @@ class _Reader:
         return CurveBlock(curve=finished.curve, location=finished.location, units=state.units,
                           eol=self.eol, incremental=state.incremental,
                           feed_word_after=None if finished.feed is None else finished.feed.word,
-                          feed_u=finished.feed_u, feed_mm_s=finished.feed_mm_s)
+                          feed_u=finished.feed_u, feed_mm_s=finished.feed_mm_s,
+                          semicolon_comments=self.dialect == "siemens")
 
 
 class _LookAhead:
@@ -249,6 +364,11 @@ class _LookAhead:
             self.ahead[0] = line
         else:
             self.ahead.popleft()
+
+
+def _code_part(line_text: str) -> str:
+    """A line without its comments: what precedes ';', with '(...)' removed."""
+    return re.sub(r"\([^)]*\)", "", line_text.split(";", 1)[0])
 
 
 def _line_ending(line_text: str) -> str:

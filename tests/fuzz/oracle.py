@@ -43,10 +43,12 @@ _COMMENT = re.compile(rb"\([^)]*\)|;.*")
 # tens of thousands of lines a case; a line it does not match takes the full check).
 _POINTED = rb"[XYZF](?!-0\.(?![0-9]))-?(?:[0-9]+\.[0-9]*|\.[0-9]+)"
 _GOOD_MOVE = re.compile(rb"(?:G0 )?(?:G1 )?" + _POINTED + rb"(?: " + _POINTED + rb")*")
-# A line a NURBS block consumes (and nurbsfeed therefore drops): a NURBS G code, or a word only
-# NURBS blocks carry, or a lone F (LinuxCNC allows one on a line of a G5.2 block). Spaces are the
-# tokenizer's: a lone CR inside a line is one ("G\r5.3" is G5.3).
+# A line a NURBS block consumes (and nurbsfeed therefore drops): a NURBS G code (G5.2, G5.3,
+# G6.2, and LinuxCNC's G5 / G5.1 splines), or a word only NURBS blocks carry (a BSPLINE and its
+# PL, PW words among them), or a lone F (LinuxCNC allows one on a line of a G5.2 block). Spaces
+# are the tokenizer's: a lone CR inside a line is one ("G\r5.3" is G5.3).
 _BLOCK_LINE = re.compile(rb"[Gg][ \t\r]*0*[56][ \t\r]*\.[ \t\r]*[23]|[KkPpLlRrQq]"
+                         rb"|[Gg][ \t\r]*0*5(?:[ \t\r]*\.[ \t\r]*1)?(?![ \t\r]*\.?[ \t\r]*[0-9])"
                          rb"|^[ \t\r]*(?:[Nn][ \t\r]*[0-9]+[ \t\r]*)?[Ff]")
 _LOCATED = r"^{}(?::\d+:\d+)?: \S"
 

@@ -12,14 +12,14 @@ import numpy as np
 
 from nurbsfeed.analysis.check.report import Findings
 from nurbsfeed.files import InputFile
-from nurbsfeed.gcode.writer import rapid_line
+from nurbsfeed.gcode.writer import ZERO_LENGTH_COMMENT, rapid_line
 from nurbsfeed.machine import Machine
 from nurbsfeed.program import CurveBlock, PassThrough
 from nurbsfeed.readers import read_program
 
 COMMENT_RE = re.compile(r"\(nurbsfeed: curve (\d+) (.*), (\d+) points, period ([0-9.eE+-]+) ms, "
                         r"(\w+), length ([0-9.]+) (mm|in), planned cycle ([0-9.]+) s\)$")
-ZERO_LENGTH_LINE = "(nurbsfeed: zero-length curve, no move written)"  # pipeline.convert_block
+ZERO_LENGTH_LINE = ZERO_LENGTH_COMMENT  # pipeline.convert_block
 MOVE_LINE_RE = re.compile(r"(?:G0*1(?![0-9.])\s*)?(?:[XYZF]\s*[-+]?[0-9.]*\s*)+")
 WORD_RE = re.compile(r"([A-Z])\s*([-+]?[0-9.]*)")
 G90_G91_MESSAGE = ("the moves of a G91 block must be bracketed by G90 and G91 lines (the "
@@ -51,7 +51,10 @@ def split_lines(text: str, ending: str) -> list[str]:
 
 
 def body(line: str) -> str:
-    return line.rstrip("\r\n")
+    """A line without its ending; a Sinumerik comment "; nurbsfeed: ..." as the "(...)" it
+    stands for (writer.comment_line)."""
+    text = line.rstrip("\r\n")
+    return f"({text[2:]})" if text.startswith("; nurbsfeed: ") else text
 
 
 def source_tokens(path: Path, machine: Machine, dialect: str

@@ -1,0 +1,7 @@
+; expect: 5:5: ASPLINE (Akima spline) is not supported: nurbsfeed reads BSPLINE, whose control points and knots make a NURBS
+; dialect: siemens
+N10 G17 G710 G90 G94
+N20 G1 X0. Y0. Z0. F600.
+N30 ASPLINE X10. Y5.
+N40 X20. Y0.
+N50 M30

@@ -1,0 +1,6 @@
+; expect: 5:13: BAUTO (A/C spline start) is not supported: nurbsfeed reads BSPLINE, whose control points and knots make a NURBS
+; dialect: siemens
+N10 G17 G710 G90 G94
+N20 G1 X0. Y0. Z0. F600.
+N30 BSPLINE BAUTO X10. Y5. PL=1.
+N40 M30
