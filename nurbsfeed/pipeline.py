@@ -32,10 +32,11 @@ from nurbsfeed.gcode.writer import (
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.interpolate import PointChunk, Stepping
 from nurbsfeed.machine import FLOOR_MARGIN, Machine
+from nurbsfeed.planning.limits import Limits
 from nurbsfeed.planning.planner import Plan, plan_curve
 from nurbsfeed.program import CurveBlock, PassThrough, ProgramItem
 from nurbsfeed.readers import read_program
-from nurbsfeed.safety import MotionGuard, feed_cap_mm_s
+from nurbsfeed.safety import MotionGuard, feed_cap_mm_s, slowdown_from_points
 
 TRACE_HEADER = "curve,k,t,u,s,v,a,j,x,y,z\n"
 # curve points, evenly spaced in u, on which a longer move at a rest is held to the chord
@@ -75,16 +76,50 @@ class FileReport:
         return sum(c.cycle_time_s for c in self.curves)
 
 
-def plan_block(block: CurveBlock, machine: Machine) -> Plan:
-    """Plan one curve, given in mm (`CurveBlock.in_mm`), under the machine's limits; a curve the
-    planner refuses (e.g. longer than max_curve_time_s) is refused at the block."""
+# the envelope planner's points read as positions (plan_block): the excess they may show, and the
+# uniform slowdowns that take it back before the S-curve planner plans the curve instead
+POSITION_REL = 0.005
+POSITION_ROUNDS = 2
+
+
+def plan_block(block: CurveBlock, machine: Machine, method: str = "rk2c") -> Plan:
+    """Plan one curve, given in mm (`CurveBlock.in_mm`), under the machine's limits
+    (`verified_plan`); a curve the planner refuses (e.g. longer than max_curve_time_s) is
+    refused at the block."""
     if not block.lengths_in_mm:
         raise ValueError("plan_block takes a block in mm: CurveBlock.in_mm()")
     try:
-        return plan_curve(block.curve, machine.limits, block.feed_u, block.feed_mm_s,
-                          machine.max_curve_time_s)
+        return verified_plan(block.curve, machine.limits, block.feed_u, block.feed_mm_s,
+                             machine.max_curve_time_s, method,
+                             feed_cap_mm_s(machine.limits, block))
     except CurveError as exc:
         raise exc.at(block.location) from None
+
+
+def verified_plan(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s: np.ndarray,
+                  max_curve_time_s: float = math.inf, method: str = "rk2c",
+                  feed_cap: float = math.inf) -> Plan:
+    """`planner.plan_curve`, and for the envelope planner (design §2e) a look at its points:
+    stepped by `method`, they are read as positions one period apart
+    (`safety.slowdown_from_points`, feed_cap the highest feed on the curve); where an axis's
+    velocity, acceleration or jerk, or the jerk vector, is above its limit by more than
+    POSITION_REL, the law is slowed uniformly by what they ask (POSITION_ROUNDS times at most),
+    and if that is not enough the S-curve planner plans the curve instead: the one bounded
+    fallback, so that the motion guard and check never meet a plan above its limits."""
+    plan = plan_curve(curve, lim, feed_u, feed_mm_s, max_curve_time_s)
+    if plan.planner != "envelope":
+        return plan
+    caps = dataclasses.replace(plan.limits, feed_mm_s=min(feed_cap, plan.limits.feed_mm_s))
+    slowdown = 1.0
+    for _ in range(POSITION_ROUNDS):
+        asks = slowdown_from_points(caps, (chunk.points
+                                           for chunk in Stepping(plan, method).chunks()))
+        if asks <= 1.0 + POSITION_REL:
+            return plan
+        slowdown *= asks * (1.0 + POSITION_REL)
+        plan = plan_curve(curve, lim, feed_u, feed_mm_s, max_curve_time_s, slowdown)
+    return plan_curve(curve, dataclasses.replace(lim, planner="scurve"), feed_u, feed_mm_s,
+                      max_curve_time_s)
 
 
 def rest_move_periods(machine: Machine) -> int:
@@ -252,7 +287,7 @@ def convert_block(block: CurveBlock, index: int, out: BinaryIO, machine: Machine
     block = block.in_mm()
     label = f'curve {index} "{block.curve.name}"'
     try:
-        plan = plan_block(block, machine)
+        plan = plan_block(block, machine, method)
     except CurveError as exc:
         raise CurveError(f"{label}: {exc.message}", exc.location) from None
     n_points = 1 + plan.n_periods

@@ -25,6 +25,7 @@ tests measure each limit on its own.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 
 import numpy as np
 
@@ -156,3 +157,30 @@ class MotionGuard:
         if worst is not None:
             raise CurveError(f"{self.label}: refused, point {self.seen + worst[0]} {worst[1]}; "
                              f"nothing was written (a safety check: please report this curve)")
+
+
+def slowdown_from_points(lim: Limits, chunks: Iterable[np.ndarray]) -> float:
+    """The least uniform slowdown (>= 1) after which the points (each chunk (N, 3), one period
+    apart, in order) keep every per-axis velocity, acceleration and jerk, and the jerk vector
+    within sqrt(J_t^2 + J_n^2), read from their differences (a slowdown by lambda divides a
+    k-th difference by lambda^k)."""
+    period = lim.period_s
+    limits = [np.asarray(per_axis, dtype=float) for per_axis in
+              (lim.axis_vel_mm_s, lim.axis_acc_mm_s2, lim.axis_jerk_mm_s3)]
+    jerk = math.hypot(lim.jerk_mm_s3, lim.normal_jerk_mm_s3)
+    worst = 1.0
+    tail = np.empty((0, 3))
+    for points in chunks:
+        joined = np.concatenate([tail, points])
+        tail = joined[-3:]
+        diff = joined
+        for k, per_axis in enumerate(limits, start=1):
+            diff = np.diff(diff, axis=0)
+            if diff.shape[0] == 0:
+                break
+            ratio = float(np.max(np.abs(diff) / (per_axis * period**k)))
+            if k == 3:
+                ratio = max(ratio, float(np.max(np.linalg.norm(diff, axis=1)))
+                            / (jerk * period**3))
+            worst = max(worst, ratio ** (1.0 / k))
+    return worst

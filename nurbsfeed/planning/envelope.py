@@ -714,13 +714,13 @@ def _profile(curve: NurbsCurve, grid: Grid, lim: Limits, nodes: _Nodes,
 
 def envelope_schedule(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.ndarray,
                       v_start: np.ndarray, feed_at_u: Callable[[np.ndarray], np.ndarray],
-                      worst_s: float = math.inf) -> Schedule | None:
+                      worst_s: float = math.inf, slowdown: float = 1.0) -> Schedule | None:
     """The schedule of `curve` under `lim` (path model) resting at grid nodes rest_nodes: the
     ends, corners and cusps. v_start (M,): a speed at the grid's nodes that keeps the limits
     (the S-curve plan's), which sets where cells are cut finer. feed_at_u: parameters (N,) ->
     programmed feed (N,). None where it cannot plan (a profile of b = 0 inside a stretch: a
     motion that never arrives) or where its schedule would last longer than worst_s (the plan
-    it would replace)."""
+    it would replace). slowdown: a uniform slowdown on top of the one the law needs."""
     if grid.length_mm <= 0.0:
         return None
     floor = 1e-9 * float(grid.s_mm[-1])
@@ -766,6 +766,7 @@ def envelope_schedule(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np
         if law.duration_s * excess < best[0]:
             best = (law.duration_s * excess, b, d, excess)
     _, b, d, excess = best
+    excess *= slowdown
     law = sampled_law(nodes, b, d, lim.period_s, excess)
     if not np.all(np.isfinite(law.jerk_mm_s3)) or not math.isfinite(law.duration_s):
         return None

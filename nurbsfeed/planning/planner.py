@@ -668,8 +668,11 @@ def _cycle_left(on: _OnGrid, law: TimeLaw, excess: float, hidden_slowdown: float
 
 
 def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
-               feed_mm_s: np.ndarray = np.empty(0), max_curve_time_s: float = math.inf) -> Plan:
+               feed_mm_s: np.ndarray = np.empty(0), max_curve_time_s: float = math.inf,
+               extra_slowdown: float = 1.0) -> Plan:
     """Plan the feed along one curve under `lim` (feed cap already in lim.feed_mm_s).
+    extra_slowdown: a uniform slowdown the envelope planner's law takes on top of its own (the
+    pipeline's check from the points asks for it, `pipeline.verified_plan`).
 
     CurveError (without a place) when the planned cycle exceeds max_curve_time_s or is not a
     finite number of periods: checked on the law's duration before it is rounded to whole
@@ -753,11 +756,12 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
                 on.v, on.peak, on.hold_start, on.hold_end, law, slowdown, piece_key,
                 piece_periods, piece_scale, on.rounds, acc, jerk)
     if lim.planner in ("optimal", "envelope"):
-        return _optimal_plan(plan, feed_u, feed_mm_s)
+        return _optimal_plan(plan, feed_u, feed_mm_s, extra_slowdown)
     return plan
 
 
-def _optimal_plan(base: Plan, feed_u: np.ndarray, feed_mm_s: np.ndarray) -> Plan:
+def _optimal_plan(base: Plan, feed_u: np.ndarray, feed_mm_s: np.ndarray,
+                  extra_slowdown: float = 1.0) -> Plan:
     """`planning.optimal`'s schedule as a plan, if it is faster than the S-curve plan `base`
     (whose law is its first iterate and whose rests it keeps); else base."""
     from nurbsfeed.planning.optimal import optimal_schedule
@@ -776,7 +780,7 @@ def _optimal_plan(base: Plan, feed_u: np.ndarray, feed_mm_s: np.ndarray) -> Plan
 
         schedule = envelope_schedule(base.curve, grid, lim, rest_nodes, v_nodes,
                                      lambda u: feed_at(u, feed_u, feed_mm_s),
-                                     base.cycle_time_s)
+                                     base.cycle_time_s, extra_slowdown)
     else:
         schedule = optimal_schedule(base.curve, grid, lim, rest_nodes, v_nodes,
                                     lambda u: feed_at(u, feed_u, feed_mm_s))

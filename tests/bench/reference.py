@@ -19,12 +19,14 @@ each plan stand:
 The optimum lies between the bound and the smaller of the other two. planned / reference above 1
 says the planner is at least that far from the optimum; below 1, the reference is the looser.
 Measured here, never asserted; the reference takes seconds to minutes a curve (HiGHS, one
-process), the planners milliseconds to a second.
+process), the planners milliseconds to a second. Where HiGHS gives up on one of the
+reference's programs the row says "failed" and has no ratio.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import statistics
 import time
 
@@ -78,14 +80,20 @@ def main() -> None:
                 plan = plan_curve(curve, machine.limits, feed_u, feed)
                 planned[planner] = (plan, time.process_time() - start)
             start = time.process_time()
-            ref = jerk_limited_schedule(curve, machines["envelope"].limits, feed_u, feed)
+            try:
+                ref_s = jerk_limited_schedule(curve, machines["envelope"].limits, feed_u,
+                                              feed).cycle_s
+            except RuntimeError:  # HiGHS gave up on one of the reference's programs
+                ref_s = math.nan
             ref_cpu = time.process_time() - start
             row = [name, setting, f"{time_optimal_bound_s(planned['envelope'][0]):.3f}",
-                   f"{ref.cycle_s:.3f}"]
+                   f"{ref_s:.3f}" if math.isfinite(ref_s) else "failed"]
             for planner in PLANNERS:
-                ratio = planned[planner][0].cycle_time_s / ref.cycle_s
-                ratios.setdefault((setting, planner), []).append(ratio)
-                row += [f"{planned[planner][0].cycle_time_s:.3f}", f"{ratio:.3f}"]
+                ratio = planned[planner][0].cycle_time_s / ref_s
+                if math.isfinite(ratio):
+                    ratios.setdefault((setting, planner), []).append(ratio)
+                row += [f"{planned[planner][0].cycle_time_s:.3f}",
+                        f"{ratio:.3f}" if math.isfinite(ratio) else "-"]
             row += [f"{planned[p][1]:.2f}" for p in PLANNERS] + [f"{ref_cpu:.1f}"]
             print("| " + " | ".join(row) + " |", flush=True)
     print()
