@@ -16,6 +16,7 @@ import os
 import signal
 import stat
 import sys
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -233,17 +234,19 @@ def internal_error(exc: Exception) -> str:
 
 
 def _convert_one(source: Path, target: Path | None, machine: Machine, method: str,
-                 dialect: str, trace: Path | None, progress: bool) -> dict[str, Any]:
+                 dialect: str, trace: Path | None, progress: _Progress | None
+                 ) -> dict[str, Any]:
     """Convert one file (also the unit of work of --jobs); errors come back as data, a bug's
     exception too (one file's crash must not stop a batch)."""
     from nurbsfeed.pipeline import convert_file
 
-    status = _Progress(source) if progress else None
+    if progress:
+        progress.file_started(source)
 
     def on_curve(result: Any) -> None:
         _check_stopped()
-        if status:
-            status.update(result)
+        if progress:
+            progress.curve_done(result)
 
     start = time.perf_counter()
     try:
@@ -256,12 +259,62 @@ def _convert_one(source: Path, target: Path | None, machine: Machine, method: st
         raise  # from stdout only (convert_file): the run ends quietly
     except Exception as exc:  # a bug: reported in the file's row, and the batch goes on
         return {"source": str(source), "error": internal_error(exc), "internal": True}
-    finally:
-        if status:
-            status.close()
     return {"source": str(source), "target": str(target) if target else "-",
             "curves": len(report.curves), "points": report.n_points,
             "cycle_s": report.cycle_time_s, "wall_s": time.perf_counter() - start}
+
+
+# ---- on a terminal: the status line, and the notice of a first compile ----
+
+PROGRESS_TICK_S = 0.5  # under --jobs, the status line's clock moves on this often
+COMPILE_NOTICE_AFTER_S = 1.0  # compiling longer than this says so (once a run)
+
+
+class _Notice:
+    """Whether the compile notice may show (not under -q), and, in a --jobs worker, the flag
+    the workers share so that it shows once for all of them."""
+
+    quiet = False
+    watching = False
+    shared: Any = None
+
+
+_progress: _Progress | None = None  # the status line of the batch being converted, if any
+
+
+def _say_compiling() -> None:
+    if _Notice.quiet:
+        return
+    if _Notice.shared is not None:
+        with _Notice.shared.get_lock():
+            if _Notice.shared.value:
+                return
+            _Notice.shared.value = 1
+    from nurbsfeed.jit import FIRST_COMPILE_S
+
+    text = f"nurbsfeed: compiling nurbsfeed's kernels once after install, ~{FIRST_COMPILE_S:.0f} s"
+    if _progress:
+        _progress.message(text)
+    else:
+        sys.stderr.write(text + "\n")
+        sys.stderr.flush()
+
+
+def _watch_compiling() -> None:
+    if not _Notice.watching:
+        _Notice.watching = True
+        from nurbsfeed.jit import watch_compiling
+
+        watch_compiling(COMPILE_NOTICE_AFTER_S, _say_compiling)
+
+
+def _compile_notice_shared() -> Any:
+    """The flag --jobs workers share to show the compile notice once (None: do not show it)."""
+    if _Notice.quiet:
+        return None
+    import multiprocessing
+
+    return multiprocessing.Value("b", 0)
 
 
 # ---- --jobs: worker processes ----
@@ -277,8 +330,10 @@ def _worker_stop(signum: int, frame: Any) -> None:
     _stop(signum, frame)
 
 
-def _init_worker() -> None:
+def _init_worker(notice_shown: Any) -> None:
     _handle_stop_signals(_worker_stop)
+    _Notice.quiet, _Notice.shared = notice_shown is None, notice_shown
+    _watch_compiling()
 
 
 def _convert_in_worker(*args: Any) -> dict[str, Any]:
@@ -293,7 +348,7 @@ def _convert_in_worker(*args: Any) -> dict[str, Any]:
 
 
 def convert_in_pool(sources: list[Path], targets: list[Path | None], jobs: int,
-                    *args: Any) -> list[dict[str, Any]]:
+                    progress: _Progress | None, *args: Any) -> list[dict[str, Any]]:
     """Convert in `jobs` worker processes; `args`: machine, method, dialect.
 
     A worker that dies (killed, out of memory, a crash in compiled code) breaks the pool and
@@ -304,9 +359,9 @@ def convert_in_pool(sources: list[Path], targets: list[Path | None], jobs: int,
     results: dict[int, dict[str, Any]] = {}
     todo = list(range(len(sources)))
     while todo:
-        lost, todo = _pool_round(todo, jobs, sources, targets, args, results)
+        lost, todo = _pool_round(todo, jobs, sources, targets, args, results, progress)
         for index in lost:
-            if _pool_round([index], 1, sources, targets, args, results)[0]:
+            if _pool_round([index], 1, sources, targets, args, results, progress)[0]:
                 results[index] = {"source": str(sources[index]), "error": (
                     "internal error: BrokenProcessPool: the worker process converting this "
                     "file died (killed by a signal, or out of memory)")}
@@ -314,17 +369,19 @@ def convert_in_pool(sources: list[Path], targets: list[Path | None], jobs: int,
 
 
 def _pool_round(todo: list[int], jobs: int, sources: list[Path], targets: list[Path | None],
-                args: tuple[Any, ...], results: dict[int, dict[str, Any]]
-                ) -> tuple[list[int], list[int]]:
+                args: tuple[Any, ...], results: dict[int, dict[str, Any]],
+                progress: _Progress | None) -> tuple[list[int], list[int]]:
     """Convert files `todo` into `results` until done or the pool breaks: (files in flight when
-    it broke, files not handed out)."""
+    it broke, files not handed out). The status line moves on as files finish, and its clock
+    every PROGRESS_TICK_S in between."""
     import multiprocessing
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
 
     waiting = todo[::-1]
     lost: list[int] = []
-    with ProcessPoolExecutor(max_workers=min(jobs, len(todo)), initializer=_init_worker) as pool:
+    with ProcessPoolExecutor(max_workers=min(jobs, len(todo)), initializer=_init_worker,
+                             initargs=(_compile_notice_shared(),)) as pool:
         try:
             running: dict[Any, int] = {}
             while (waiting or running) and not lost:
@@ -332,13 +389,19 @@ def _pool_round(todo: list[int], jobs: int, sources: list[Path], targets: list[P
                     index = waiting.pop()
                     running[pool.submit(_convert_in_worker, sources[index], targets[index],
                                         *args, None, False)] = index
-                done, _ = wait(running, return_when=FIRST_COMPLETED)
+                done, _ = wait(running, timeout=PROGRESS_TICK_S if progress else None,
+                               return_when=FIRST_COMPLETED)
                 for future in done:
                     index = running.pop(future)
                     try:
                         results[index] = future.result()
                     except BrokenProcessPool:
                         lost.append(index)
+                    else:
+                        if progress:
+                            progress.file_done(index, results[index].get("points", 0))
+                if progress and not done:
+                    progress.show()
             lost += running.values()
         except Interrupted as exc:
             pool.shutdown(wait=False, cancel_futures=True)
@@ -350,42 +413,93 @@ def _pool_round(todo: list[int], jobs: int, sources: list[Path], targets: list[P
 
 
 class _Progress:
-    """A progress bar on stderr (only used when stderr is a terminal).
+    """One status line on stderr, rewritten in place (only when stderr is a terminal): files
+    done of total, points written, elapsed time and time left.
 
-    The fraction done is the source line of the last converted curve over the file's line
-    count: cheap, monotone, and right for programs whose curves are spread through the file.
+    The fraction done counts input bytes: those of the files finished, plus, for the file being
+    converted in this process, its share up to the source line of the last converted curve
+    (cheap, monotone, and right for programs whose curves are spread through the file). Time
+    left is the elapsed time scaled by the fraction still to do.
     """
 
-    WIDTH = 30
-
-    def __init__(self, source: Path) -> None:
-        self.name, self.curves, self.points, self.last = source.name, 0, 0, 0.0
+    def __init__(self, sources: list[Path]) -> None:
+        self.sizes = [_size(source) for source in sources]
+        self.total = max(1, sum(self.sizes))
+        self.files, self.files_done, self.bytes_done, self.points = len(sources), 0, 0, 0
+        self.current, self.current_points = 0.0, 0  # the file being converted here
+        self.lines = 1
         self.start = time.monotonic()
-        try:
-            with open(source, "rb") as handle:
-                self.lines = max(1, sum(chunk.count(b"\n") for chunk in
-                                        iter(lambda: handle.read(1 << 20), b"")))
-        except OSError:
-            self.lines = 1
+        self.last = -1.0
+        self.lock = threading.Lock()  # the compile notice comes from a timer thread
 
-    def update(self, result: Any) -> None:
-        self.curves += 1
-        self.points += result.n_points
+    def file_started(self, source: Path) -> None:
+        self.current, self.current_points = 0.0, 0
+        self.lines = _line_count(source)
+
+    def curve_done(self, result: Any) -> None:
+        self.current = min(1.0, (result.location.line or 1) / self.lines)
+        self.current_points += result.n_points
+        self.show()
+
+    def file_done(self, index: int, points: int) -> None:
+        self.files_done += 1
+        self.bytes_done += self.sizes[index]
+        self.points += points
+        self.current, self.current_points = 0.0, 0
+        self.show(force=True)
+
+    def show(self, force: bool = False) -> None:
         now = time.monotonic()
-        if now - self.last < 0.1:
+        if not force and now - self.last < 0.1:
             return
         self.last = now
-        done = min(1.0, (result.location.line or 1) / self.lines)
-        filled = int(done * self.WIDTH)
-        eta = (now - self.start) * (1.0 - done) / done if done > 0 else 0.0
-        sys.stderr.write(f"\r{self.name} [{'#' * filled}{'.' * (self.WIDTH - filled)}] "
-                         f"{100 * done:3.0f}%  {self.curves} curves, {self.points:,} points, "
-                         f"{eta:.0f} s left ")
-        sys.stderr.flush()
+        elapsed_s = now - self.start
+        done = min(1.0, (self.bytes_done + self.current * self.sizes[
+            min(self.files_done, self.files - 1)]) / self.total)
+        left = (f"~{_duration(elapsed_s * (1.0 - done) / done)} left" if done > 0.0
+                else "time left unknown")
+        self._write(f"\r{self.files_done} of {self.files} files, "
+                    f"{self.points + self.current_points:,} points, "
+                    f"{_duration(elapsed_s)} elapsed, {left}\033[K")
+
+    def message(self, text: str) -> None:
+        """A line of its own above the status line."""
+        self._write(f"\r\033[K{text}\n")
+        self.last = -1.0
 
     def close(self) -> None:
-        sys.stderr.write("\r\033[K")
-        sys.stderr.flush()
+        self._write("\r\033[K")
+
+    def _write(self, text: str) -> None:
+        with self.lock:
+            sys.stderr.write(text)
+            sys.stderr.flush()
+
+
+def _size(path: Path) -> int:
+    try:
+        return os.stat(path).st_size
+    except OSError:
+        return 0
+
+
+def _line_count(path: Path) -> int:
+    try:
+        with open(path, "rb") as handle:
+            return max(1, sum(chunk.count(b"\n") for chunk in
+                              iter(lambda: handle.read(1 << 20), b"")))
+    except OSError:
+        return 1
+
+
+def _duration(seconds: float) -> str:
+    """12 s, 3 min 05 s, 1 h 02 min."""
+    whole = int(round(seconds))
+    if whole < 60:
+        return f"{whole} s"
+    if whole < 3600:
+        return f"{whole // 60} min {whole % 60:02d} s"
+    return f"{whole // 3600} h {whole % 3600 // 60:02d} min"
 
 
 @main.command()
@@ -424,14 +538,28 @@ def convert(inputs: tuple[str, ...], output: Path | None, method: str, dialect: 
         except OSError as exc:
             raise InputError(f"cannot create the output directory ({exc.strerror})",
                              Location(str(output))) from None
-    progress = sys.stderr is not None and sys.stderr.isatty() and not quiet
+    global _progress
+    if quiet:
+        _Notice.quiet = True
+    elif sys.stderr is not None and sys.stderr.isatty():
+        _progress = _Progress(sources)
     if method == "taylor1":
         click.echo(TAYLOR1_WARNING, err=True)
-    if jobs > 1 and len(sources) > 1:
-        results = convert_in_pool(sources, targets, jobs, machine, method, dialect)
-    else:
-        results = [_convert_one(s, t, machine, method, dialect, trace, progress)
-                   for s, t in zip(sources, targets)]
+    try:
+        if jobs > 1 and len(sources) > 1:
+            results = convert_in_pool(sources, targets, jobs, _progress, machine, method,
+                                      dialect)
+        else:
+            results = []
+            for index, (source, target) in enumerate(zip(sources, targets)):
+                results.append(_convert_one(source, target, machine, method, dialect, trace,
+                                            _progress))
+                if _progress:
+                    _progress.file_done(index, results[-1].get("points", 0))
+    finally:
+        if _progress:
+            _progress.close()
+            _progress = None
     failed = [r for r in results if "error" in r]
     if not many:
         if failed:
@@ -668,6 +796,7 @@ def run() -> None:
     """
     gc.freeze()
     _handle_stop_signals(_stop)
+    _watch_compiling()
     try:
         main()
     except Interrupted as exc:

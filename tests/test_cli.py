@@ -342,17 +342,10 @@ def test_taylor1_conversions_warn_that_they_can_break_the_limits(tmp_path: Path)
     assert stderr == ""
 
 
-def test_progress_bar_only_on_a_terminal(tmp_path: Path) -> None:
-    """Not a terminal (CliRunner): no progress at all. A pseudo-terminal: a bar on stderr.
-    The bar is drawn at the first converted curve (then at most every 0.1 s): two curves show
-    it, and a bar written where no terminal is would show at the first."""
+def _under_a_terminal(*args: str) -> tuple[int, str]:
+    """Run `nurbsfeed` with stderr on a pseudo-terminal: (exit code, everything it showed)."""
     import pty
 
-    big = tmp_path / "big.json"
-    big.write_text(BUTTERFLIES.format(",".join([BUTTERFLY_CURVE] * 2)))
-    code, _, stderr = run("convert", str(big), "-o", str(tmp_path / "a.nc"))
-    assert code == 0 and "\r" not in stderr and "[" not in stderr
-    out = tmp_path / "b.nc"
     chunks: list[bytes] = []
 
     def read(fd: int) -> bytes:
@@ -360,11 +353,50 @@ def test_progress_bar_only_on_a_terminal(tmp_path: Path) -> None:
         chunks.append(data)
         return data
 
-    status = pty.spawn([sys.executable, "-m", "nurbsfeed.cli", "convert", str(big), "-o",
-                        str(out)], read)
-    text = b"".join(chunks).decode()
-    assert os.waitstatus_to_exitcode(status) == 0 and out.exists()
-    assert re.search(r"\rbig\.json \[#*\.*\] +\d+%  \d+ curves, [\d,]+ points", text)
+    status = pty.spawn([sys.executable, "-m", "nurbsfeed.cli", *args], read)
+    return os.waitstatus_to_exitcode(status), b"".join(chunks).decode()
+
+
+STATUS_LINE = re.compile(r"\r(\d+) of (\d+) files, ([\d,]+) points, (\d+) s elapsed, "
+                         r"(~\d+ s left|time left unknown)\x1b\[K")
+
+
+def test_progress_only_on_a_terminal(tmp_path: Path) -> None:
+    """Not a terminal (CliRunner): no progress at all. A pseudo-terminal: one status line,
+    rewritten in place, with files done of total, points, elapsed time and time left; it is
+    drawn at the first converted curve (then at most every 0.1 s), so two curves show it."""
+    big = tmp_path / "big.json"
+    big.write_text(BUTTERFLIES.format(",".join([BUTTERFLY_CURVE] * 2)))
+    code, _, stderr = run("convert", str(big), "-o", str(tmp_path / "a.nc"))
+    assert code == 0 and "\r" not in stderr and "files," not in stderr
+    out = tmp_path / "b.nc"
+    code, text = _under_a_terminal("convert", str(big), "-o", str(out))
+    assert code == 0 and out.exists()
+    lines = STATUS_LINE.findall(text)
+    assert lines[0][:2] == ("0", "1") and lines[-1][:3] == ("1", "1", "10,962")
+    assert text.endswith("\r\x1b[K" + f"{big}: 2 curves, 10,962 points, cycle 10.960 s -> "
+                         f"{out}\r\n")
+
+
+def test_progress_of_a_batch_under_jobs(tmp_path: Path) -> None:
+    """--jobs 2 on a terminal: the status line counts the files as the workers finish them
+    (3 of 3 at the end, with every point), and goes away before the summary."""
+    sources = [SAMPLES / name for name in ("butterfly.json", "circle.json", "quarter-circle.json")]
+    code, text = _under_a_terminal("convert", *map(str, sources), "-o", str(tmp_path / "out"),
+                                   "--jobs", "2")
+    assert code == 0
+    lines = STATUS_LINE.findall(text)
+    assert [line[1] for line in lines] == ["3"] * len(lines)
+    assert [int(line[0]) for line in lines] == sorted(int(line[0]) for line in lines)
+    assert lines[-1][:3] == ("3", "3", f"{5481 + 1746 + 389:,}")  # the summary's points
+    assert lines[-1][4].startswith("~0 s left")
+    assert "\x1b[Kfile " in text and text.rstrip().endswith("3 of 3 files converted")
+
+
+def test_no_progress_under_quiet_on_a_terminal(tmp_path: Path) -> None:
+    code, text = _under_a_terminal("convert", str(SAMPLES / "circle.json"), "-o",
+                                   str(tmp_path / "c.nc"), "-q")
+    assert code == 0 and text == ""
 
 
 BUTTERFLY_CURVE = (SAMPLES / "butterfly.json").read_text().split('"curves": [')[1].rsplit("]", 1)[0]
