@@ -34,8 +34,16 @@ from nurbsfeed.errors import (
     Interrupted,
     Location,
     NurbsfeedError,
+    ProfileError,
 )
-from nurbsfeed.machine import FLOAT_KEYS, INT_KEYS, JERK_MODELS, PLANNERS, load_machine
+from nurbsfeed.machine import (
+    FLOAT_KEYS,
+    INT_KEYS,
+    JERK_MODELS,
+    PLANNERS,
+    load_machine,
+    machine_from_mapping,
+)
 
 if TYPE_CHECKING:
     from nurbsfeed.machine import Machine
@@ -136,8 +144,11 @@ def machine_options(func: Callable[..., Any]) -> Callable[..., Any]:
                              "paper-table1) or a YAML file.")(func)
 
 
+OVERRIDE_KEYS = FLOAT_KEYS + INT_KEYS + ("jerk_model", "planner")
+
+
 def machine_from(kwargs: dict[str, Any]) -> Machine:
-    overrides = {k: kwargs.pop(k) for k in FLOAT_KEYS + INT_KEYS + ("jerk_model", "planner")}
+    overrides = {k: kwargs.pop(k) for k in OVERRIDE_KEYS}
     return load_machine(kwargs.pop("machine"), overrides)
 
 
@@ -743,11 +754,41 @@ def check(source: Path, output: Path, dialect: str, as_json: bool, **kwargs: Any
     from nurbsfeed.analysis import check_files, render_check
     from nurbsfeed.errors import EXIT_OK, EXIT_VIOLATION
 
-    name = kwargs["machine"]
-    report = check_files(source, output, machine_from(kwargs), dialect)
-    click.echo(json.dumps(dict(report.as_dict(), machine=name), indent=2) if as_json
-               else render_check(report, name))
+    machine = _machine_of(output, kwargs)
+    report = check_files(source, output, machine, dialect)
+    click.echo(json.dumps(dict(report.as_dict(), machine=machine.name), indent=2) if as_json
+               else render_check(report, machine.name))
     sys.exit(EXIT_OK if report.ok else EXIT_VIOLATION)
+
+
+def _machine_of(output: Path, kwargs: dict[str, Any]) -> Machine:
+    """The profile to check `output` under: the one recorded in it (gcode.profile_record),
+    with the overrides, if any; or -m's, with them. Either must agree with the record on every
+    key (a program checked under limits it was not made for fails for no fault of its own). An
+    output without a record (no curves, or an older nurbsfeed's) is checked under -m, the
+    default profile if none is given."""
+    from nurbsfeed.files import InputFile
+    from nurbsfeed.gcode.profile_record import differences, read_record
+
+    recorded = read_record(InputFile(output).lines(), str(output))
+    named = (click.get_current_context().get_parameter_source("machine")
+             is not click.core.ParameterSource.DEFAULT)
+    if recorded is None or named:
+        machine = machine_from(kwargs)
+    else:  # the overrides, if any, apply to the recorded profile
+        overrides = {key: kwargs[key] for key in OVERRIDE_KEYS if kwargs[key] is not None}
+        if not overrides:
+            return recorded.machine
+        machine = machine_from_mapping(dict(recorded.machine.profile), recorded.name,
+                                       overrides=overrides, name=recorded.name)
+    if recorded is not None:
+        changed = differences(recorded.machine, machine)
+        if changed:
+            raise ProfileError(
+                f"converted under the profile {recorded.name} (recorded here), but checked "
+                f"under {machine.name}, which differs: {'; '.join(changed)} (leave out -m and "
+                "the overrides to check under the recorded profile)", recorded.location)
+    return machine
 
 
 @main.command()

@@ -22,6 +22,7 @@ import numpy as np
 
 from nurbsfeed.errors import CurveError, InputError, Location
 from nurbsfeed.files import ENCODING, ERRORS, atomic_output
+from nurbsfeed.gcode.profile_record import record_lines
 from nurbsfeed.gcode.writer import MoveWriter, cycle_comment, rapid_line
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.interpolate import PointChunk, Stepping
@@ -257,6 +258,8 @@ def convert_block(block: CurveBlock, index: int, out: BinaryIO, machine: Machine
     if block.rapid_to_start:
         out.write(rapid_line(block.curve.points[0], machine.decimals, block.units).encode("ascii")
                   + eol)
+    if index == 0:  # the profile record: once, before the first curve's comment line
+        out.write(b"".join(line.encode("ascii") + eol for line in record_lines(machine)))
     out.write(cycle_comment(index, block.curve.name, n_points, period_s, method,
                             plan.cycle_time_s, plan.length_mm,
                             block.units).encode(ENCODING, ERRORS) + eol)

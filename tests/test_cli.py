@@ -44,7 +44,10 @@ def test_convert_json_writes_a_complete_program_with_trace(tmp_path: Path) -> No
     text = out.read_text()
     lines = text.splitlines()
     assert lines[1] == "G21 G90" and lines[2] == "G0 X10. Y0. Z0." and lines[-1] == "M2"
-    assert lines[3].startswith("(nurbsfeed: curve 0 quarter-circle-r10, ")
+    record = [line for line in lines if line.startswith("(nurbsfeed profile: ")]
+    assert lines[3:3 + len(record)] == record and record[0].startswith(
+        "(nurbsfeed profile: name paper-table1, nurbsfeed ")
+    assert lines[3 + len(record)].startswith("(nurbsfeed: curve 0 quarter-circle-r10, ")
     rows = list(csv.reader(io.StringIO(trace.read_text())))
     assert rows[0] == ["curve", "k", "t", "u", "s", "v", "a", "j", "x", "y", "z"]
     table = np.array(rows[1:], dtype=float)
