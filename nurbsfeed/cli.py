@@ -656,7 +656,7 @@ def plan(input: Path, dialect: str, reference: bool, **kwargs: Any) -> None:
             _echo_stretches(p, unit)
         else:
             _echo_segments(p, unit)
-        bound = time_optimal_bound_s(p)
+        bound = time_optimal_bound_s(p, item)
         click.echo(f"  cycle time {p.cycle_time_s:.3f} s ({p.n_periods} periods of "
                    f"{lim.period_s * 1e3:g} ms; time scale {p.time_scale:.9f})")
         click.echo(f"  time-optimal bound {bound:.3f} s (acceleration-limited, no jerk limit): "

@@ -108,9 +108,25 @@ def test_plan_reports_key_points_segments_and_the_bound() -> None:
     code, stdout, _ = run("plan", str(SAMPLES / "butterfly.json"), "-m", "paper-table1")
     assert code == 0
     assert "kappa0 0.1 1/mm; 25 curvature peaks >= kappa0" in stdout
-    assert "time-optimal bound 5.48" in stdout
+    assert "time-optimal bound 5.47" in stdout
     cycle = float(stdout.split("cycle time ")[1].split(" s")[0])
     assert 5.48 < cycle < 7.0
+
+
+def test_plans_time_optimal_bound_respects_the_programmed_feed(tmp_path: Path) -> None:
+    """The bound is a lower bound on the cycle under every cap the plan obeys, the programmed F
+    among them: a slow F makes it at least length / F (and the plan, which F caps too, stays
+    above it, by the time it takes to start and stop)."""
+    source = tmp_path / "slow.nc"
+    source.write_text((SAMPLES / "fanuc-quadratic.nc").read_text().replace("F3000.", "F290."))
+    code, stdout, _ = run("plan", str(source))
+    assert code == 0
+    length_mm = float(re.search(r"length ([\d.]+) mm", stdout)[1])
+    bound = float(re.search(r"time-optimal bound ([\d.]+) s", stdout)[1])
+    cycle = float(re.search(r"cycle time ([\d.]+) s", stdout)[1])
+    above = float(re.search(r"planned is \+([\d.]+)%", stdout)[1])
+    assert length_mm / (290.0 / 60.0) <= bound <= cycle
+    assert above < 5.0  # not +3019 %: the machine's 200 mm/s is not what caps this curve
 
 
 def test_plan_reference_is_the_jerk_limited_optimum_on_a_quarter_circle() -> None:
