@@ -221,6 +221,11 @@ def refuse_overwrites(sources: list[Path], targets: list[Path | None], named: Pa
         if target is None:
             continue
         key = os.path.realpath(target).casefold()
+        if key in writers and _same_file(writers[key], source):
+            first = writers[key]
+            aliases = "" if str(first) == str(source) else f" (as {first} and as {source})"
+            raise InputError(f"this input is given twice{aliases}: give each input once (a "
+                             "directory and a glob can both name it)", Location(str(source)))
         if key in writers:
             raise InputError(f"both {writers[key]} and {source} would be written here (rename "
                              "one, or convert them in separate runs)", Location(str(target)))
