@@ -530,7 +530,8 @@ def _duration(seconds: float) -> str:
               "(single input only).")
 @click.option("--jobs", "-j", type=click.IntRange(1, 64), default=1, show_default=True,
               help="Convert files in this many parallel processes.")
-@click.option("--quiet", "-q", is_flag=True, help="No summary on stderr.")
+@click.option("--quiet", "-q", is_flag=True,
+              help="No summary or progress on stderr; only the files that failed, if any.")
 @reports_errors
 def convert(inputs: tuple[str, ...], output: Path | None, method: str, dialect: str,
             trace: Path | None, jobs: int, quiet: bool, **kwargs: Any) -> None:
@@ -590,12 +591,25 @@ def convert(inputs: tuple[str, ...], output: Path | None, method: str, dialect: 
                        f"cycle {r['cycle_s']:.3f} s -> {r['target']}", err=True)
         return
     if not quiet or failed:
-        _print_summary(results)
+        _print_summary(results, failures_only=quiet)
     if failed:
         sys.exit(EXIT_BAD_INPUT)
 
 
-def _print_summary(results: list[dict[str, Any]]) -> None:
+def _print_summary(results: list[dict[str, Any]], failures_only: bool = False) -> None:
+    """The per-file table and the count; with failures_only (-q), the failed files' rows."""
+    if failures_only:
+        for r in results:
+            if "error" in r:  # located errors name their file already
+                click.echo(r["error"] if r["error"].startswith(r["source"])
+                           else f"{r['source']}: {r['error']}", err=True)
+    else:
+        _print_table(results)
+    ok = sum("error" not in r for r in results)
+    click.echo(f"{ok} of {len(results)} files converted", err=True)
+
+
+def _print_table(results: list[dict[str, Any]]) -> None:
     width = max(len(r["source"]) for r in results)
     click.echo(f"{'file':<{width}}  {'curves':>6}  {'points':>10}  {'cycle s':>9}  status",
                err=True)
@@ -606,8 +620,6 @@ def _print_summary(results: list[dict[str, Any]]) -> None:
         else:
             click.echo(f"{r['source']:<{width}}  {r['curves']:>6}  {r['points']:>10,}  "
                        f"{r['cycle_s']:>9.3f}  ok -> {r['target']}", err=True)
-    ok = sum("error" not in r for r in results)
-    click.echo(f"{ok} of {len(results)} files converted", err=True)
 
 
 # ---- plan ------------------------------------------------------------------------------------

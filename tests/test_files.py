@@ -79,6 +79,18 @@ def test_a_crash_in_one_file_fails_its_row_and_the_others_are_converted(
     assert stderr.endswith("2 of 3 files converted\n")
 
 
+def test_quiet_prints_only_the_files_that_failed(tmp_path: Path) -> None:
+    """-q: nothing when all convert; when one fails, its line and the count, not the table."""
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"curves": [')
+    out = tmp_path / "out"
+    assert run("convert", QUARTER, CIRCLE, "-o", out, "-q") == (0, "", "")
+    code, stdout, stderr = run("convert", QUARTER, bad, CIRCLE, "-o", out, "-q")
+    assert (code, stdout) == (2, "")
+    assert stderr == (f"{bad}:1:13: not valid JSON: Expecting value\n"
+                      "2 of 3 files converted\n")
+
+
 def test_a_crash_converting_a_single_input_is_one_line_with_the_file(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(nurbsfeed.pipeline, "convert_file", crash_on(QUARTER.name, boom))
