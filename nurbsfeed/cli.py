@@ -16,6 +16,7 @@ import os
 import signal
 import stat
 import sys
+import textwrap
 import threading
 import time
 from collections.abc import Callable
@@ -37,6 +38,7 @@ from nurbsfeed.errors import (
     ProfileError,
 )
 from nurbsfeed.machine import (
+    AXIS_KEYS,
     FLOAT_KEYS,
     INT_KEYS,
     JERK_MODELS,
@@ -129,26 +131,52 @@ def _handle_stop_signals(handler: Callable[[int, Any], None]) -> None:
             signal.signal(signum, handler)
 
 
-def machine_options(func: Callable[..., Any]) -> Callable[..., Any]:
-    """--machine plus one override option per profile key (e.g. --max-feed-mm-s 50)."""
-    for key in reversed(FLOAT_KEYS + INT_KEYS):
-        func = click.option(f"--{key.replace('_', '-')}", key,
-                            type=int if key in INT_KEYS else float, default=None,
-                            help=f"Override the profile's {key}.")(func)
-    func = click.option("--jerk-model", "jerk_model", type=click.Choice(list(JERK_MODELS)),
-                        default=None, help="Override the profile's jerk_model.")(func)
-    func = click.option("--planner", "planner", type=click.Choice(list(PLANNERS)),
-                        default=None, help="Override the profile's planner.")(func)
-    return click.option("--machine", "-m", default="default", show_default=True,
-                        help="Machine profile: a built-in name (default, linuxcnc, "
-                             "paper-table1) or a YAML file.")(func)
+def machine_options(func: Callable[..., Any] | None = None, *, planner: bool = True) -> Any:
+    """--machine plus one override option per profile key (e.g. --max-feed-mm-s 50); --planner
+    only where a plan is made (`planner`). The overrides are left out of --help, which names
+    them once in PROFILE_HELP instead of a line each."""
+
+    def add(func: Callable[..., Any]) -> Callable[..., Any]:
+        for key in reversed(FLOAT_KEYS + INT_KEYS):
+            func = click.option(f"--{key.replace('_', '-')}", key,
+                                type=int if key in INT_KEYS else float, default=None,
+                                hidden=True)(func)
+        func = click.option("--jerk-model", "jerk_model", type=click.Choice(list(JERK_MODELS)),
+                            default=None, hidden=True)(func)
+        if planner:
+            func = click.option("--planner", "planner", type=click.Choice(list(PLANNERS)),
+                                default=None, hidden=True)(func)
+        return click.option("--machine", "-m", default="default", show_default=True,
+                            help="Machine profile: a built-in name (default, linuxcnc, "
+                                 "paper-table1) or a YAML file. Any of its keys can be "
+                                 "overridden: --KEY VALUE (below).")(func)
+
+    return add(func) if func is not None else add
+
+
+def _profile_help(planner: bool = True) -> str:
+    """The epilog paragraph that names the override options."""
+    keys = [f"--{key.replace('_', '-')}" for key in FLOAT_KEYS + INT_KEYS if key not in AXIS_KEYS]
+    choices = f"--jerk-model {'|'.join(JERK_MODELS)}"
+    if planner:
+        choices += f", --planner {'|'.join(PLANNERS)}"
+    text = ("Profile overrides, each one key of the profile (README, Profile keys): "
+            f"{', '.join(keys)}, the per-axis --max-{{vel,acc,jerk}}-{{x,y,z}}-... limits; "
+            f"{choices}.")
+    # wrapped here, not by click, which would break the option names at their hyphens
+    return "\b\n" + textwrap.fill(text, 78, break_on_hyphens=False, break_long_words=False)
+
+
+def _epilog(examples: str, planner: bool = True) -> str:
+    """A command's --help epilog: examples (kept as written), then the override options."""
+    return "\b\nExamples:\n" + examples + "\n\n" + _profile_help(planner)
 
 
 OVERRIDE_KEYS = FLOAT_KEYS + INT_KEYS + ("jerk_model", "planner")
 
 
 def machine_from(kwargs: dict[str, Any]) -> Machine:
-    overrides = {k: kwargs.pop(k) for k in OVERRIDE_KEYS}
+    overrides = {k: kwargs.pop(k, None) for k in OVERRIDE_KEYS}
     return load_machine(kwargs.pop("machine"), overrides)
 
 
@@ -518,7 +546,10 @@ def _duration(seconds: float) -> str:
     return f"{whole // 3600} h {whole % 3600 // 60:02d} min"
 
 
-@main.command()
+@main.command(epilog=_epilog(
+    "  nurbsfeed convert part.nc -o part-g1.nc            # one program (stdout without -o)\n"
+    "  nurbsfeed convert shop/ more/*.nc -o out/ --jobs 2 # a batch\n"
+    "  nurbsfeed convert curve.json -m linuxcnc --max-feed-mm-s 150 -o curve.ngc"))
 @click.argument("inputs", nargs=-1, required=True)
 @click.option("-o", "--output", type=click.Path(path_type=Path),
               help="Output file, or a directory for several inputs (names kept; .json -> .nc). "
@@ -624,7 +655,8 @@ def _print_table(results: list[dict[str, Any]]) -> None:
 
 # ---- plan ------------------------------------------------------------------------------------
 
-@main.command()
+@main.command(epilog=_epilog(
+    "  nurbsfeed plan samples/butterfly.json -m paper-table1"))
 @click.argument("input", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--reference", is_flag=True,
               help="Also find a jerk-limited schedule under the same limits, by its own code "
@@ -737,7 +769,8 @@ REFERENCE_NEEDS_SCIPY = ("nurbsfeed plan --reference needs scipy: "
                          "pip install 'nurbsfeed[reference]'")
 
 
-@main.command()
+@main.command(epilog=_epilog(
+    "  nurbsfeed compare samples/butterfly.json -m paper-table1 --json"))
 @click.argument("input", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @machine_options
 @dialect_option
@@ -757,10 +790,12 @@ def compare(input: Path, dialect: str, repeat: int, as_json: bool, **kwargs: Any
                else render_comparison(result, name))
 
 
-@main.command()
+@main.command(epilog=_epilog(
+    "  nurbsfeed check samples/butterfly.json butterfly.nc   # under its recorded profile\n"
+    "  nurbsfeed check part.nc part-g1.nc --json", planner=False))
 @click.argument("source", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.argument("output", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@machine_options
+@machine_options(planner=False)
 @dialect_option
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
 @reports_errors
@@ -793,7 +828,7 @@ def _machine_of(output: Path, kwargs: dict[str, Any]) -> Machine:
     if recorded is None or named:
         machine = machine_from(kwargs)
     else:  # the overrides, if any, apply to the recorded profile
-        overrides = {key: kwargs[key] for key in OVERRIDE_KEYS if kwargs[key] is not None}
+        overrides = {key: kwargs[key] for key in OVERRIDE_KEYS if kwargs.get(key) is not None}
         if not overrides:
             return recorded.machine
         machine = machine_from_mapping(dict(recorded.machine.profile), recorded.name,
@@ -808,7 +843,8 @@ def _machine_of(output: Path, kwargs: dict[str, Any]) -> Machine:
     return machine
 
 
-@main.command()
+@main.command(epilog=_epilog(
+    "  nurbsfeed plot samples/butterfly.json -m paper-table1 -o butterfly.png"))
 @click.argument("input", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
               help="The PNG to write.")

@@ -113,6 +113,36 @@ def test_plan_reports_key_points_segments_and_the_bound() -> None:
     assert 5.48 < cycle < 7.0
 
 
+@pytest.mark.parametrize(("command", "options"), [
+    ("convert", {"--output", "--machine", "--method", "--dialect", "--trace", "--jobs", "--quiet"}),
+    ("plan", {"--reference", "--machine", "--dialect"}),
+    ("compare", {"--machine", "--dialect", "--repeat", "--json"}),
+    ("check", {"--machine", "--dialect", "--json"}),
+    ("plot", {"--output", "--curve", "--machine", "--method", "--dialect"}),
+])
+def test_each_commands_help_lists_its_own_options_and_an_example(command: str,
+                                                                  options: set[str]) -> None:
+    """Not a line per profile key: the overrides are named once, in a paragraph; each command
+    shows examples of itself; check, which plans nothing, has no --planner."""
+    code, stdout, _ = run(command, "--help")
+    assert code == 0
+    section = stdout.split("Options:\n")[1].split("\n\n")[0]
+    listed = set(re.findall(r"^  (?:-\w, )?(--[a-z-]+)", section, re.M))
+    assert listed == options | {"--help"}
+    examples = stdout.split("Examples:\n")[1].split("\n\n")[0].splitlines()
+    assert examples and all(line.startswith(f"    nurbsfeed {command} ") for line in examples)
+    overrides = stdout.split("Profile overrides")[1]
+    assert "--max-feed-mm-s" in overrides and "--jerk-model paper|path" in overrides
+    assert ("--planner" in overrides) == (command != "check")
+    assert len(stdout.splitlines()) < 40
+
+
+def test_check_refuses_planner_which_it_has_no_use_for() -> None:
+    code, _, stderr = run("check", str(SAMPLES / "butterfly.json"), "x.nc", "--planner",
+                          "optimal")
+    assert code == 2 and "No such option '--planner'" in stderr
+
+
 def test_plans_time_optimal_bound_respects_the_programmed_feed(tmp_path: Path) -> None:
     """The bound is a lower bound on the cycle under every cap the plan obeys, the programmed F
     among them: a slow F makes it at least length / F (and the plan, which F caps too, stays
