@@ -2,7 +2,7 @@
 
 Units live in the key names and are what they say: mm and seconds, whatever the program's unit
 (an inch program's curves are converted to mm when they are read, `CurveBlock.in_mm`). Every key
-has a range (`RANGES`, README "Machine profile keys"): a value that passes is one the planner, the
+has a range (`RANGES`, docs/profiles.md): a value that passes is one the planner, the
 stepping loop and the writer compute with in finite numbers.
 """
 
@@ -78,7 +78,7 @@ JERK_MODELS = ("paper", "path")  # profile key jerk_model (planning.path_model)
 PLANNERS = ("scurve", "optimal")
 OPTIMAL_NEEDS_SCIPY = ("planner: optimal needs scipy (its linear programs): "
                        "pip install 'nurbsfeed[optimal]'")
-# The accepted values, ends included (README "Profile keys" says why each is physical).
+# The accepted values, ends included (docs/profiles.md says why each is physical).
 RANGES: dict[str, tuple[float, float]] = {
     "period_s": (1e-6, 1.0),
     "max_feed_mm_s": (1e-3, 1e5),

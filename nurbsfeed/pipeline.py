@@ -95,7 +95,7 @@ class RestMoves:
 
     LinuxCNC runs a tangent move shorter than its ramp cutoff (1 / ARC_BLEND_RAMP_FREQ: 10 ms)
     at one constant acceleration, from the speed it enters with to the speed it leaves with, the
-    smaller of its F and the next (README "Running on LinuxCNC"). The first move from a rest is
+    smaller of its F and the next (docs/linuxcnc.md). The first move from a rest is
     entered at 0: it takes twice its planned time. A longer move is run as a trapezoid instead,
     at the machine's acceleration up to its F (at a rest F is small: reached at once). So the
     first planned periods after a rest, and the last before one, are written as one move each.

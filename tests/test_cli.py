@@ -216,7 +216,7 @@ BAD_JSON = [
      "weights)"),
     ('{"degree": 1, "knots": [0,0,1,1], "control_points": [[0,0],[1,NaN]]}',
      "1:63: not valid JSON: NaN is not a number JSON allows"),
-    # just outside the input envelope (README "Input envelope"), refused before any work
+    # just outside the input envelope (docs/refusals.md "Input envelope"), refused before any work
     ('{"degree": 1000000000000, "knots": [0, 1], "control_points": [[0, 0]]}',
      "1:2: curves[0]: degree 1000000000000 is above 9, the highest nurbsfeed evaluates "
      "accurately"),
