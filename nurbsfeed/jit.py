@@ -50,12 +50,12 @@ def jit(func: F) -> F:
     return _njit(func)
 
 
-def watch_compiling(after_s: float, notify: Callable[[], None]) -> None:
+def watch_compiling(after_s: float, notify: Callable[[], None]) -> Any:
     """Call `notify` once, from a timer thread, when numba has spent `after_s` seconds compiling
-    in this process (loading kernels from the cache takes milliseconds and does not count);
-    nothing without numba."""
+    in this process (loading kernels from the cache takes milliseconds and does not count).
+    Returns the listener (for `numba.core.event.unregister`); None without numba."""
     if not JIT_ENABLED:
-        return
+        return None
     from numba.core import event
 
     class CompileWatch(event.Listener):
@@ -88,4 +88,6 @@ def watch_compiling(after_s: float, notify: Callable[[], None]) -> None:
                 self.fired = True
                 notify()
 
-    event.register("numba:compile", CompileWatch())
+    watch = CompileWatch()
+    event.register("numba:compile", watch)
+    return watch

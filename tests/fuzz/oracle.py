@@ -266,8 +266,8 @@ def check_case(folder: Path, source_name: str, data: bytes, profile: bytes | Non
             problem = "exit 0 without an output file"
         else:
             output = target.read_bytes()
-            # the reader's rule (docs/programs.md, Inputs): a .json file, or any whose first character
-            # other than white space is "{" (a sample spliced whole into an .ngc is JSON)
+            # the reader's rule (docs/programs.md, Inputs): a .json file, or any whose first
+            # character other than white space is "{" (a sample spliced whole into an .ngc is JSON)
             is_json = source.suffix.lower() == ".json" or data.lstrip().startswith(b"{")
             problem = (json_program_problem(output) if is_json
                        else pass_through_problem(data, output))
