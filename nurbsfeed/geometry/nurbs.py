@@ -12,10 +12,9 @@ a textbook evaluator that lives in the tests.
 the numbers come from `python -m tests.bench.envelope`, which compares this evaluation with an
 exact rational one and converts curves at and beyond each limit). Inside it, two rescalings that
 do not change the curve keep every number the kernels see well scaled: the knots are mapped
-affinely onto
-[0, 1] (a NURBS curve does not depend on an affine change of its parameter; `input_u` maps back
-for anything shown to the user), and the weights are multiplied by a power of two, exactly, so
-that the largest lies in [1, 2) (C depends only on the weights' ratios).
+affinely onto [0, 1] (a NURBS curve does not depend on an affine change of its parameter;
+`input_u` maps back for anything shown to the user), and the weights are multiplied by a power
+of two, exactly, so that the largest lies in [1, 2) (C depends only on the weights' ratios).
 """
 
 from __future__ import annotations
