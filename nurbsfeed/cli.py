@@ -134,7 +134,7 @@ def _handle_stop_signals(handler: Callable[[int, Any], None]) -> None:
 def machine_options(func: Callable[..., Any] | None = None, *, planner: bool = True) -> Any:
     """--machine plus one override option per profile key (e.g. --max-feed-mm-s 50); --planner
     only where a plan is made (`planner`). The overrides are left out of --help, which names
-    them once in PROFILE_HELP instead of a line each."""
+    them once in the epilog (`_profile_help`) instead of a line each."""
 
     def add(func: Callable[..., Any]) -> Callable[..., Any]:
         for key in reversed(FLOAT_KEYS + INT_KEYS):

@@ -33,6 +33,7 @@ from nurbsfeed.cli import main
 TIME_LIMIT_S = 10.0
 CHECK_TIME_LIMIT_S = 60.0  # `check` of a slow inch curve (70,000 moves) takes seconds
 CURVE_COMMENT = b"(nurbsfeed: curve "
+PROFILE_RECORD = b"(nurbsfeed profile: "  # gcode.profile_record
 ZERO_LENGTH = b"(nurbsfeed: zero-length curve, no move written)"
 _MOVE_WORD = rb"[XYZF]-?[0-9]*\.?[0-9]*"
 _GENERATED = re.compile(rb"(?:G1 )?" + _MOVE_WORD + rb"(?: " + _MOVE_WORD + rb")*|G90|G91")
@@ -156,6 +157,9 @@ def pass_through_problem(source: bytes, output: bytes) -> str | None:
             segments.append([])
         else:
             segments[-1].append(line)
+    # the profile record: nurbsfeed's own lines just before the first curve's comment
+    while len(segments) > 1 and segments[0] and segments[0][-1].startswith(PROFILE_RECORD):
+        segments[0].pop()
     at = _match(segments[0], src, 0)
     if at is None:
         return _first_mismatch(segments[0], src, 0)
