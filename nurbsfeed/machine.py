@@ -8,12 +8,11 @@ stepping loop and the writer compute with in finite numbers.
 
 from __future__ import annotations
 
-import dataclasses
 import importlib.util
 import math
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -231,10 +230,11 @@ def machine_from_mapping(data: Any, where: str, places: Mapping[str, Location] |
 
 def _in_force(given: dict[str, float | int], values: dict[str, float | int], jerk_model: str,
               planner: str) -> tuple[tuple[str, float | int | str], ...]:
-    """Every profile key with its value in force, in FLOAT_KEYS + INT_KEYS order: the given
-    ones, else the Machine's default (`values`: the output settings as the Machine gets them,
-    decimals included); per-axis limits only where given."""
-    defaults: dict[str, Any] = {f.name: f.default for f in dataclasses.fields(Machine)}
+    """Every profile key with its value in force, jerk_model and planner first, then in
+    FLOAT_KEYS + INT_KEYS order: the given ones, else the Machine's default (`values`: the
+    output settings as the Machine gets them, decimals included); per-axis limits only where
+    given."""
+    defaults: dict[str, Any] = {f.name: f.default for f in fields(Machine)}
     pairs: list[tuple[str, float | int | str]] = [("jerk_model", jerk_model),
                                                   ("planner", planner)]
     for key in FLOAT_KEYS + INT_KEYS:

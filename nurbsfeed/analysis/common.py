@@ -35,20 +35,21 @@ def time_optimal_bound_s(plan: Plan, block: CurveBlock | None = None) -> float:
     if block is not None and block.feed_mm_s.size:
         programmed = feed_at(grid.u, block.feed_u, block.feed_mm_s)
     cap = speed_limit(grid.kappa_1_mm, lim, programmed)
-    c = np.maximum(cap[:-1], cap[1:])
+    # an interval's cap; between two stops (cap 0 at both ends) the grid sets none
+    inside = np.maximum(cap[:-1], cap[1:])
+    inside[inside == 0.0] = np.inf
     cap[0] = cap[-1] = 0.0
     v2 = cap**2
-    two_a = 2.0 * lim.acc_mm_s2
+    acc = lim.acc_mm_s2
     for i in range(1, v2.size):
-        v2[i] = min(v2[i], v2[i - 1] + two_a * ds[i - 1])
+        v2[i] = min(v2[i], v2[i - 1] + 2.0 * acc * ds[i - 1])
     for i in range(v2.size - 2, -1, -1):
-        v2[i] = min(v2[i], v2[i + 1] + two_a * ds[i])
+        v2[i] = min(v2[i], v2[i + 1] + 2.0 * acc * ds[i])
     v0, v1 = np.sqrt(v2[:-1]), np.sqrt(v2[1:])
-    peak = np.minimum(np.sqrt(0.5 * (v2[:-1] + v2[1:]) + 0.5 * two_a * ds), c)
-    ramps_mm = (2.0 * peak**2 - v2[:-1] - v2[1:]) / two_a
-    cruise_s = np.where(peak > 0.0, np.maximum(ds - ramps_mm, 0.0) / np.where(peak > 0.0, peak,
-                                                                             1.0), 0.0)
-    return float(np.sum((2.0 * peak - v0 - v1) / lim.acc_mm_s2 + cruise_s))
+    peak = np.minimum(np.sqrt(0.5 * (v2[:-1] + v2[1:]) + acc * ds), inside)
+    cruise_mm = np.maximum(ds - (2.0 * peak**2 - v2[:-1] - v2[1:]) / (2.0 * acc), 0.0)
+    cruise_s = np.divide(cruise_mm, peak, out=np.zeros_like(ds), where=peak > 0.0)
+    return float(np.sum((2.0 * peak - v0 - v1) / acc + cruise_s))
 
 
 def curve_blocks(path: Path, dialect: str = "auto") -> list[CurveBlock]:
