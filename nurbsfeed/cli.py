@@ -16,6 +16,8 @@ import os
 import signal
 import stat
 import sys
+import textwrap
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -33,8 +35,17 @@ from nurbsfeed.errors import (
     Interrupted,
     Location,
     NurbsfeedError,
+    ProfileError,
 )
-from nurbsfeed.machine import FLOAT_KEYS, INT_KEYS, JERK_MODELS, PLANNERS, load_machine
+from nurbsfeed.machine import (
+    AXIS_KEYS,
+    FLOAT_KEYS,
+    INT_KEYS,
+    JERK_MODELS,
+    PLANNERS,
+    load_machine,
+    machine_from_mapping,
+)
 
 if TYPE_CHECKING:
     from nurbsfeed.machine import Machine
@@ -44,7 +55,8 @@ if TYPE_CHECKING:
 TAYLOR1_WARNING = ("nurbsfeed: warning: taylor1 is the paper's first-order baseline; its points "
                    "drift off the planned feed by up to a few percent, which can break the "
                    "limits (use rk2c to machine)")
-GCODE_SUFFIXES = (".nc", ".ngc", ".gcode", ".tap", ".cnc", ".txt", ".json", ".mpf", ".eia")
+GCODE_SUFFIXES = (".nc", ".ngc", ".gcode", ".tap", ".cnc", ".txt", ".json", ".mpf", ".spf",
+                  ".eia")
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
@@ -120,23 +132,52 @@ def _handle_stop_signals(handler: Callable[[int, Any], None]) -> None:
             signal.signal(signum, handler)
 
 
-def machine_options(func: Callable[..., Any]) -> Callable[..., Any]:
-    """--machine plus one override option per profile key (e.g. --max-feed-mm-s 50)."""
-    for key in reversed(FLOAT_KEYS + INT_KEYS):
-        func = click.option(f"--{key.replace('_', '-')}", key,
-                            type=int if key in INT_KEYS else float, default=None,
-                            help=f"Override the profile's {key}.")(func)
-    func = click.option("--jerk-model", "jerk_model", type=click.Choice(list(JERK_MODELS)),
-                        default=None, help="Override the profile's jerk_model.")(func)
-    func = click.option("--planner", "planner", type=click.Choice(list(PLANNERS)),
-                        default=None, help="Override the profile's planner.")(func)
-    return click.option("--machine", "-m", default="default", show_default=True,
-                        help="Machine profile: a built-in name (default, linuxcnc, "
-                             "paper-table1) or a YAML file.")(func)
+def machine_options(func: Callable[..., Any] | None = None, *, planner: bool = True) -> Any:
+    """--machine plus one override option per profile key (e.g. --max-feed-mm-s 50); --planner
+    only where a plan is made (`planner`). The overrides are left out of --help, which names
+    them once in the epilog (`_profile_help`) instead of a line each."""
+
+    def add(func: Callable[..., Any]) -> Callable[..., Any]:
+        for key in reversed(FLOAT_KEYS + INT_KEYS):
+            func = click.option(f"--{key.replace('_', '-')}", key,
+                                type=int if key in INT_KEYS else float, default=None,
+                                hidden=True)(func)
+        func = click.option("--jerk-model", "jerk_model", type=click.Choice(list(JERK_MODELS)),
+                            default=None, hidden=True)(func)
+        if planner:
+            func = click.option("--planner", "planner", type=click.Choice(list(PLANNERS)),
+                                default=None, hidden=True)(func)
+        return click.option("--machine", "-m", default="default", show_default=True,
+                            help="Machine profile: a built-in name (default, linuxcnc, "
+                                 "paper-table1) or a YAML file. Any of its keys can be "
+                                 "overridden: --KEY VALUE (below).")(func)
+
+    return add(func) if func is not None else add
+
+
+def _profile_help(planner: bool = True) -> str:
+    """The epilog paragraph that names the override options."""
+    keys = [f"--{key.replace('_', '-')}" for key in FLOAT_KEYS + INT_KEYS if key not in AXIS_KEYS]
+    choices = f"--jerk-model {'|'.join(JERK_MODELS)}"
+    if planner:
+        choices += f", --planner {'|'.join(PLANNERS)}"
+    text = ("Profile overrides, each one key of the profile (README, Profile keys): "
+            f"{', '.join(keys)}, the per-axis --max-{{vel,acc,jerk}}-{{x,y,z}}-... limits; "
+            f"{choices}.")
+    # wrapped here, not by click, which would break the option names at their hyphens
+    return "\b\n" + textwrap.fill(text, 78, break_on_hyphens=False, break_long_words=False)
+
+
+def _epilog(examples: str, planner: bool = True) -> str:
+    """A command's --help epilog: examples (kept as written), then the override options."""
+    return "\b\nExamples:\n" + examples + "\n\n" + _profile_help(planner)
+
+
+OVERRIDE_KEYS = FLOAT_KEYS + INT_KEYS + ("jerk_model", "planner")
 
 
 def machine_from(kwargs: dict[str, Any]) -> Machine:
-    overrides = {k: kwargs.pop(k) for k in FLOAT_KEYS + INT_KEYS + ("jerk_model", "planner")}
+    overrides = {k: kwargs.pop(k, None) for k in OVERRIDE_KEYS}
     return load_machine(kwargs.pop("machine"), overrides)
 
 
@@ -209,6 +250,11 @@ def refuse_overwrites(sources: list[Path], targets: list[Path | None], named: Pa
         if target is None:
             continue
         key = os.path.realpath(target).casefold()
+        if key in writers and _same_file(writers[key], source):
+            first = writers[key]
+            aliases = "" if str(first) == str(source) else f" (as {first} and as {source})"
+            raise InputError(f"this input is given twice{aliases}: give each input once (a "
+                             "directory and a glob can both name it)", Location(str(source)))
         if key in writers:
             raise InputError(f"both {writers[key]} and {source} would be written here (rename "
                              "one, or convert them in separate runs)", Location(str(target)))
@@ -233,17 +279,19 @@ def internal_error(exc: Exception) -> str:
 
 
 def _convert_one(source: Path, target: Path | None, machine: Machine, method: str,
-                 dialect: str, trace: Path | None, progress: bool) -> dict[str, Any]:
+                 dialect: str, trace: Path | None, progress: _Progress | None
+                 ) -> dict[str, Any]:
     """Convert one file (also the unit of work of --jobs); errors come back as data, a bug's
     exception too (one file's crash must not stop a batch)."""
     from nurbsfeed.pipeline import convert_file
 
-    status = _Progress(source) if progress else None
+    if progress:
+        progress.file_started(source)
 
     def on_curve(result: Any) -> None:
         _check_stopped()
-        if status:
-            status.update(result)
+        if progress:
+            progress.curve_done(result)
 
     start = time.perf_counter()
     try:
@@ -256,12 +304,62 @@ def _convert_one(source: Path, target: Path | None, machine: Machine, method: st
         raise  # from stdout only (convert_file): the run ends quietly
     except Exception as exc:  # a bug: reported in the file's row, and the batch goes on
         return {"source": str(source), "error": internal_error(exc), "internal": True}
-    finally:
-        if status:
-            status.close()
     return {"source": str(source), "target": str(target) if target else "-",
             "curves": len(report.curves), "points": report.n_points,
             "cycle_s": report.cycle_time_s, "wall_s": time.perf_counter() - start}
+
+
+# ---- on a terminal: the status line, and the notice of a first compile ----
+
+PROGRESS_TICK_S = 0.5  # under --jobs, the status line's clock moves on this often
+COMPILE_NOTICE_AFTER_S = 1.0  # compiling longer than this says so (once a run)
+
+
+class _Notice:
+    """Whether the compile notice may show (not under -q), and, in a --jobs worker, the flag
+    the workers share so that it shows once for all of them."""
+
+    quiet = False
+    watching = False
+    shared: Any = None
+
+
+_progress: _Progress | None = None  # the status line of the batch being converted, if any
+
+
+def _say_compiling() -> None:
+    if _Notice.quiet:
+        return
+    if _Notice.shared is not None:
+        with _Notice.shared.get_lock():
+            if _Notice.shared.value:
+                return
+            _Notice.shared.value = 1
+    from nurbsfeed.jit import FIRST_COMPILE_S
+
+    text = f"nurbsfeed: compiling nurbsfeed's kernels once after install, ~{FIRST_COMPILE_S:.0f} s"
+    if _progress:
+        _progress.message(text)
+    else:
+        sys.stderr.write(text + "\n")
+        sys.stderr.flush()
+
+
+def _watch_compiling() -> None:
+    if not _Notice.watching:
+        _Notice.watching = True
+        from nurbsfeed.jit import watch_compiling
+
+        watch_compiling(COMPILE_NOTICE_AFTER_S, _say_compiling)
+
+
+def _compile_notice_shared() -> Any:
+    """The flag --jobs workers share to show the compile notice once (None: do not show it)."""
+    if _Notice.quiet:
+        return None
+    import multiprocessing
+
+    return multiprocessing.Value("b", 0)
 
 
 # ---- --jobs: worker processes ----
@@ -277,8 +375,10 @@ def _worker_stop(signum: int, frame: Any) -> None:
     _stop(signum, frame)
 
 
-def _init_worker() -> None:
+def _init_worker(notice_shown: Any) -> None:
     _handle_stop_signals(_worker_stop)
+    _Notice.quiet, _Notice.shared = notice_shown is None, notice_shown
+    _watch_compiling()
 
 
 def _convert_in_worker(*args: Any) -> dict[str, Any]:
@@ -293,7 +393,7 @@ def _convert_in_worker(*args: Any) -> dict[str, Any]:
 
 
 def convert_in_pool(sources: list[Path], targets: list[Path | None], jobs: int,
-                    *args: Any) -> list[dict[str, Any]]:
+                    progress: _Progress | None, *args: Any) -> list[dict[str, Any]]:
     """Convert in `jobs` worker processes; `args`: machine, method, dialect.
 
     A worker that dies (killed, out of memory, a crash in compiled code) breaks the pool and
@@ -304,9 +404,9 @@ def convert_in_pool(sources: list[Path], targets: list[Path | None], jobs: int,
     results: dict[int, dict[str, Any]] = {}
     todo = list(range(len(sources)))
     while todo:
-        lost, todo = _pool_round(todo, jobs, sources, targets, args, results)
+        lost, todo = _pool_round(todo, jobs, sources, targets, args, results, progress)
         for index in lost:
-            if _pool_round([index], 1, sources, targets, args, results)[0]:
+            if _pool_round([index], 1, sources, targets, args, results, progress)[0]:
                 results[index] = {"source": str(sources[index]), "error": (
                     "internal error: BrokenProcessPool: the worker process converting this "
                     "file died (killed by a signal, or out of memory)")}
@@ -314,17 +414,19 @@ def convert_in_pool(sources: list[Path], targets: list[Path | None], jobs: int,
 
 
 def _pool_round(todo: list[int], jobs: int, sources: list[Path], targets: list[Path | None],
-                args: tuple[Any, ...], results: dict[int, dict[str, Any]]
-                ) -> tuple[list[int], list[int]]:
+                args: tuple[Any, ...], results: dict[int, dict[str, Any]],
+                progress: _Progress | None) -> tuple[list[int], list[int]]:
     """Convert files `todo` into `results` until done or the pool breaks: (files in flight when
-    it broke, files not handed out)."""
+    it broke, files not handed out). The status line moves on as files finish, and its clock
+    every PROGRESS_TICK_S in between."""
     import multiprocessing
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
 
     waiting = todo[::-1]
     lost: list[int] = []
-    with ProcessPoolExecutor(max_workers=min(jobs, len(todo)), initializer=_init_worker) as pool:
+    with ProcessPoolExecutor(max_workers=min(jobs, len(todo)), initializer=_init_worker,
+                             initargs=(_compile_notice_shared(),)) as pool:
         try:
             running: dict[Any, int] = {}
             while (waiting or running) and not lost:
@@ -332,13 +434,19 @@ def _pool_round(todo: list[int], jobs: int, sources: list[Path], targets: list[P
                     index = waiting.pop()
                     running[pool.submit(_convert_in_worker, sources[index], targets[index],
                                         *args, None, False)] = index
-                done, _ = wait(running, return_when=FIRST_COMPLETED)
+                done, _ = wait(running, timeout=PROGRESS_TICK_S if progress else None,
+                               return_when=FIRST_COMPLETED)
                 for future in done:
                     index = running.pop(future)
                     try:
                         results[index] = future.result()
                     except BrokenProcessPool:
                         lost.append(index)
+                    else:
+                        if progress:
+                            progress.file_done(index, results[index].get("points", 0))
+                if progress and not done:
+                    progress.show()
             lost += running.values()
         except Interrupted as exc:
             pool.shutdown(wait=False, cancel_futures=True)
@@ -350,45 +458,99 @@ def _pool_round(todo: list[int], jobs: int, sources: list[Path], targets: list[P
 
 
 class _Progress:
-    """A progress bar on stderr (only used when stderr is a terminal).
+    """One status line on stderr, rewritten in place (only when stderr is a terminal): files
+    done of total, points written, elapsed time and time left.
 
-    The fraction done is the source line of the last converted curve over the file's line
-    count: cheap, monotone, and right for programs whose curves are spread through the file.
+    The fraction done counts input bytes: those of the files finished, plus, for the file being
+    converted in this process, its share up to the source line of the last converted curve
+    (cheap, monotone, and right for programs whose curves are spread through the file). Time
+    left is the elapsed time scaled by the fraction still to do.
     """
 
-    WIDTH = 30
-
-    def __init__(self, source: Path) -> None:
-        self.name, self.curves, self.points, self.last = source.name, 0, 0, 0.0
+    def __init__(self, sources: list[Path]) -> None:
+        self.sizes = [_size(source) for source in sources]
+        self.total = max(1, sum(self.sizes))
+        self.files, self.files_done, self.bytes_done, self.points = len(sources), 0, 0, 0
+        self.current, self.current_points = 0.0, 0  # the file being converted here
+        self.lines = 1
         self.start = time.monotonic()
-        try:
-            with open(source, "rb") as handle:
-                self.lines = max(1, sum(chunk.count(b"\n") for chunk in
-                                        iter(lambda: handle.read(1 << 20), b"")))
-        except OSError:
-            self.lines = 1
+        self.last = -1.0
+        self.lock = threading.Lock()  # the compile notice comes from a timer thread
 
-    def update(self, result: Any) -> None:
-        self.curves += 1
-        self.points += result.n_points
+    def file_started(self, source: Path) -> None:
+        self.current, self.current_points = 0.0, 0
+        self.lines = _line_count(source)
+
+    def curve_done(self, result: Any) -> None:
+        self.current = min(1.0, (result.location.line or 1) / self.lines)
+        self.current_points += result.n_points
+        self.show()
+
+    def file_done(self, index: int, points: int) -> None:
+        self.files_done += 1
+        self.bytes_done += self.sizes[index]
+        self.points += points
+        self.current, self.current_points = 0.0, 0
+        self.show(force=True)
+
+    def show(self, force: bool = False) -> None:
         now = time.monotonic()
-        if now - self.last < 0.1:
+        if not force and now - self.last < 0.1:
             return
         self.last = now
-        done = min(1.0, (result.location.line or 1) / self.lines)
-        filled = int(done * self.WIDTH)
-        eta = (now - self.start) * (1.0 - done) / done if done > 0 else 0.0
-        sys.stderr.write(f"\r{self.name} [{'#' * filled}{'.' * (self.WIDTH - filled)}] "
-                         f"{100 * done:3.0f}%  {self.curves} curves, {self.points:,} points, "
-                         f"{eta:.0f} s left ")
-        sys.stderr.flush()
+        elapsed_s = now - self.start
+        done = min(1.0, (self.bytes_done + self.current * self.sizes[
+            min(self.files_done, self.files - 1)]) / self.total)
+        left = (f"~{_duration(elapsed_s * (1.0 - done) / done)} left" if done > 0.0
+                else "time left unknown")
+        self._write(f"\r{self.files_done} of {self.files} files, "
+                    f"{self.points + self.current_points:,} points, "
+                    f"{_duration(elapsed_s)} elapsed, {left}\033[K")
+
+    def message(self, text: str) -> None:
+        """A line of its own above the status line."""
+        self._write(f"\r\033[K{text}\n")
+        self.last = -1.0
 
     def close(self) -> None:
-        sys.stderr.write("\r\033[K")
-        sys.stderr.flush()
+        self._write("\r\033[K")
+
+    def _write(self, text: str) -> None:
+        with self.lock:
+            sys.stderr.write(text)
+            sys.stderr.flush()
 
 
-@main.command()
+def _size(path: Path) -> int:
+    try:
+        return os.stat(path).st_size
+    except OSError:
+        return 0
+
+
+def _line_count(path: Path) -> int:
+    try:
+        with open(path, "rb") as handle:
+            return max(1, sum(chunk.count(b"\n") for chunk in
+                              iter(lambda: handle.read(1 << 20), b"")))
+    except OSError:
+        return 1
+
+
+def _duration(seconds: float) -> str:
+    """12 s, 3 min 05 s, 1 h 02 min."""
+    whole = int(round(seconds))
+    if whole < 60:
+        return f"{whole} s"
+    if whole < 3600:
+        return f"{whole // 60} min {whole % 60:02d} s"
+    return f"{whole // 3600} h {whole % 3600 // 60:02d} min"
+
+
+@main.command(epilog=_epilog(
+    "  nurbsfeed convert part.nc -o part-g1.nc            # one program (stdout without -o)\n"
+    "  nurbsfeed convert shop/ more/*.nc -o out/ --jobs 2 # a batch\n"
+    "  nurbsfeed convert curve.json -m linuxcnc --max-feed-mm-s 150 -o curve.ngc"))
 @click.argument("inputs", nargs=-1, required=True)
 @click.option("-o", "--output", type=click.Path(path_type=Path),
               help="Output file, or a directory for several inputs (names kept; .json -> .nc). "
@@ -400,7 +562,8 @@ class _Progress:
               "(single input only).")
 @click.option("--jobs", "-j", type=click.IntRange(1, 64), default=1, show_default=True,
               help="Convert files in this many parallel processes.")
-@click.option("--quiet", "-q", is_flag=True, help="No summary on stderr.")
+@click.option("--quiet", "-q", is_flag=True,
+              help="No summary or progress on stderr; only the files that failed, if any.")
 @reports_errors
 def convert(inputs: tuple[str, ...], output: Path | None, method: str, dialect: str,
             trace: Path | None, jobs: int, quiet: bool, **kwargs: Any) -> None:
@@ -424,14 +587,28 @@ def convert(inputs: tuple[str, ...], output: Path | None, method: str, dialect: 
         except OSError as exc:
             raise InputError(f"cannot create the output directory ({exc.strerror})",
                              Location(str(output))) from None
-    progress = sys.stderr is not None and sys.stderr.isatty() and not quiet
+    global _progress
+    if quiet:
+        _Notice.quiet = True
+    elif sys.stderr is not None and sys.stderr.isatty():
+        _progress = _Progress(sources)
     if method == "taylor1":
         click.echo(TAYLOR1_WARNING, err=True)
-    if jobs > 1 and len(sources) > 1:
-        results = convert_in_pool(sources, targets, jobs, machine, method, dialect)
-    else:
-        results = [_convert_one(s, t, machine, method, dialect, trace, progress)
-                   for s, t in zip(sources, targets)]
+    try:
+        if jobs > 1 and len(sources) > 1:
+            results = convert_in_pool(sources, targets, jobs, _progress, machine, method,
+                                      dialect)
+        else:
+            results = []
+            for index, (source, target) in enumerate(zip(sources, targets)):
+                results.append(_convert_one(source, target, machine, method, dialect, trace,
+                                            _progress))
+                if _progress:
+                    _progress.file_done(index, results[-1].get("points", 0))
+    finally:
+        if _progress:
+            _progress.close()
+            _progress = None
     failed = [r for r in results if "error" in r]
     if not many:
         if failed:
@@ -446,12 +623,25 @@ def convert(inputs: tuple[str, ...], output: Path | None, method: str, dialect: 
                        f"cycle {r['cycle_s']:.3f} s -> {r['target']}", err=True)
         return
     if not quiet or failed:
-        _print_summary(results)
+        _print_summary(results, failures_only=quiet)
     if failed:
         sys.exit(EXIT_BAD_INPUT)
 
 
-def _print_summary(results: list[dict[str, Any]]) -> None:
+def _print_summary(results: list[dict[str, Any]], failures_only: bool = False) -> None:
+    """The per-file table and the count; with failures_only (-q), the failed files' rows."""
+    if failures_only:
+        for r in results:
+            if "error" in r:  # located errors name their file already
+                click.echo(r["error"] if r["error"].startswith(r["source"])
+                           else f"{r['source']}: {r['error']}", err=True)
+    else:
+        _print_table(results)
+    ok = sum("error" not in r for r in results)
+    click.echo(f"{ok} of {len(results)} files converted", err=True)
+
+
+def _print_table(results: list[dict[str, Any]]) -> None:
     width = max(len(r["source"]) for r in results)
     click.echo(f"{'file':<{width}}  {'curves':>6}  {'points':>10}  {'cycle s':>9}  status",
                err=True)
@@ -462,13 +652,12 @@ def _print_summary(results: list[dict[str, Any]]) -> None:
         else:
             click.echo(f"{r['source']:<{width}}  {r['curves']:>6}  {r['points']:>10,}  "
                        f"{r['cycle_s']:>9.3f}  ok -> {r['target']}", err=True)
-    ok = sum("error" not in r for r in results)
-    click.echo(f"{ok} of {len(results)} files converted", err=True)
 
 
 # ---- plan ------------------------------------------------------------------------------------
 
-@main.command()
+@main.command(epilog=_epilog(
+    "  nurbsfeed plan samples/butterfly.json -m paper-table1"))
 @click.argument("input", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--reference", is_flag=True,
               help="Also find a jerk-limited schedule under the same limits, by its own code "
@@ -517,7 +706,7 @@ def plan(input: Path, dialect: str, reference: bool, **kwargs: Any) -> None:
             _echo_stretches(p, unit)
         else:
             _echo_segments(p, unit)
-        bound = time_optimal_bound_s(p)
+        bound = time_optimal_bound_s(p, item)
         click.echo(f"  cycle time {p.cycle_time_s:.3f} s ({p.n_periods} periods of "
                    f"{lim.period_s * 1e3:g} ms; time scale {p.time_scale:.9f})")
         click.echo(f"  time-optimal bound {bound:.3f} s (acceleration-limited, no jerk limit): "
@@ -582,7 +771,8 @@ REFERENCE_NEEDS_SCIPY = ("nurbsfeed plan --reference needs scipy: "
                          "pip install 'nurbsfeed[reference]'")
 
 
-@main.command()
+@main.command(epilog=_epilog(
+    "  nurbsfeed compare samples/butterfly.json -m paper-table1 --json"))
 @click.argument("input", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @machine_options
 @dialect_option
@@ -602,10 +792,12 @@ def compare(input: Path, dialect: str, repeat: int, as_json: bool, **kwargs: Any
                else render_comparison(result, name))
 
 
-@main.command()
+@main.command(epilog=_epilog(
+    "  nurbsfeed check samples/butterfly.json butterfly.nc   # under its recorded profile\n"
+    "  nurbsfeed check part.nc part-g1.nc --json", planner=False))
 @click.argument("source", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.argument("output", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@machine_options
+@machine_options(planner=False)
 @dialect_option
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
 @reports_errors
@@ -616,14 +808,45 @@ def check(source: Path, output: Path, dialect: str, as_json: bool, **kwargs: Any
     from nurbsfeed.analysis import check_files, render_check
     from nurbsfeed.errors import EXIT_OK, EXIT_VIOLATION
 
-    name = kwargs["machine"]
-    report = check_files(source, output, machine_from(kwargs), dialect)
-    click.echo(json.dumps(dict(report.as_dict(), machine=name), indent=2) if as_json
-               else render_check(report, name))
+    machine = _machine_of(output, kwargs)
+    report = check_files(source, output, machine, dialect)
+    click.echo(json.dumps(dict(report.as_dict(), machine=machine.name), indent=2) if as_json
+               else render_check(report, machine.name))
     sys.exit(EXIT_OK if report.ok else EXIT_VIOLATION)
 
 
-@main.command()
+def _machine_of(output: Path, kwargs: dict[str, Any]) -> Machine:
+    """The profile to check `output` under: the one recorded in it (gcode.profile_record),
+    with the overrides, if any; or -m's, with them. Either must agree with the record on every
+    key (a program checked under limits it was not made for fails for no fault of its own). An
+    output without a record (no curves, or an older nurbsfeed's) is checked under -m, the
+    default profile if none is given."""
+    from nurbsfeed.files import InputFile
+    from nurbsfeed.gcode.profile_record import differences, read_record
+
+    recorded = read_record(InputFile(output).lines(), str(output))
+    named = (click.get_current_context().get_parameter_source("machine")
+             is not click.core.ParameterSource.DEFAULT)
+    if recorded is None or named:
+        machine = machine_from(kwargs)
+    else:  # the overrides, if any, apply to the recorded profile
+        overrides = {key: kwargs[key] for key in OVERRIDE_KEYS if kwargs.get(key) is not None}
+        if not overrides:
+            return recorded.machine
+        machine = machine_from_mapping(dict(recorded.machine.profile), recorded.name,
+                                       overrides=overrides, name=recorded.name)
+    if recorded is not None:
+        changed = differences(recorded.machine, machine)
+        if changed:
+            raise ProfileError(
+                f"converted under the profile {recorded.name} (recorded here), but checked "
+                f"under {machine.name}, which differs: {'; '.join(changed)} (leave out -m and "
+                "the overrides to check under the recorded profile)", recorded.location)
+    return machine
+
+
+@main.command(epilog=_epilog(
+    "  nurbsfeed plot samples/butterfly.json -m paper-table1 -o butterfly.png"))
 @click.argument("input", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
               help="The PNG to write.")
@@ -669,6 +892,7 @@ def run() -> None:
     """
     gc.freeze()
     _handle_stop_signals(_stop)
+    _watch_compiling()
     try:
         main()
     except Interrupted as exc:

@@ -191,15 +191,16 @@ def _arc(knots, coef, degree, n_ctrl, a, b, tol, span):
 @jit
 def _illinois(x, g, lo, hi, g_lo, g_hi, side):
     """One step of Illinois regula falsi: the bracket [lo, hi] (g_lo < 0 <= g_hi) after the
-    candidate x with value g, and the side it replaced (-1: lo, 1: hi). Replacing the same side
-    twice halves the other end's value, so that the bracket shrinks from both ends."""
+    candidate x with value g, and the side it replaced (-1: lo, 1: hi, 0: none yet). Replacing
+    the same side twice halves the other end's value, so that the bracket shrinks from both
+    ends. (side is a float: numba would compile this once more for the literal integer 0.)"""
     if g < 0.0:
-        if side == -1:
+        if side == -1.0:
             g_hi *= 0.5
-        return x, hi, g, g_hi, -1
-    if side == 1:
+        return x, hi, g, g_hi, -1.0
+    if side == 1.0:
         g_lo *= 0.5
-    return lo, x, g_lo, g, 1
+    return lo, x, g_lo, g, 1.0
 
 
 @jit
@@ -224,7 +225,7 @@ def _arc_step(knots, coef, degree, n_ctrl, u, ds, guess, span):
         arc_hi = arc_lo + _arc(knots, coef, degree, n_ctrl, u + lo, u + hi, tol, span)
     g_lo = arc_lo - ds
     g_hi = arc_hi - ds
-    side = 0
+    side = 0.0
     for _ in range(CHORD_ITERATIONS):
         if hi - lo <= 1e-16 * (abs(u) + hi) or g_hi == g_lo or -g_lo <= tol or g_hi <= tol:
             break
@@ -300,7 +301,7 @@ def _chord_step(knots, coef, degree, n_ctrl, u, px, py, pz, ds, lo, guess, span)
         lo = hi
         g_lo = g_hi
         hi = lo0 + 2.0 * (hi - lo0)
-    side = 0
+    side = 0.0
     for _ in range(CHORD_ITERATIONS):
         if hi - lo <= 1e-16 * (abs(u) + hi) or g_hi == g_lo:
             break
@@ -435,15 +436,14 @@ def _plan_times(t_a, t_b, n, lo, hi):
 
 
 @jit
-def _first_period_at(t_a, t_b, n, x, right):
+def _first_period_at(t_a, t_b, n, x):
     """np.searchsorted over a stretch's plan times (n+1,), which are never stored: the first
-    period k with t_k >= x (t_k > x if right), by bisection."""
+    period k with t_k >= x, by bisection."""
     lo = 0
     hi = n + 1
     while lo < hi:
         mid = (lo + hi) // 2
-        t = _plan_time(t_a, t_b, n, mid)
-        if t < x or (right and t == x):
+        if _plan_time(t_a, t_b, n, mid) < x:
             lo = mid + 1
         else:
             hi = mid
@@ -701,8 +701,11 @@ def _last_flat_periods(t0, a0, jk, v0, duration, t_a, t_b, n, periods):
         if jk[i] != 0.0 or a0[i] != 0.0 or v0[i] <= 0.0 or t0[i] >= t_b:
             continue
         # the periods k with t_k >= t0 and t_k+1 <= end, the last one before n - 1
-        first = _first_period_at(t_a, t_b, n, t0[i], False)
-        stop = min(_first_period_at(t_a, t_b, n, end, True) - 1, n - 1)
+        first = _first_period_at(t_a, t_b, n, t0[i])
+        after = _first_period_at(t_a, t_b, n, end)  # then the first with t_k > end (plan
+        if after <= n and _plan_time(t_a, t_b, n, after) == end:  # times strictly increase)
+            after += 1
+        stop = min(after - 1, n - 1)
         if stop - first >= periods:
             return stop - periods, v0[i]
     return -1, 0.0

@@ -6,16 +6,27 @@ as plain Python (slowly, but identically).
 
 Compiled code is cached on disk by numba's public `cache=True`; nothing here reaches into numba's
 internals, so a numba release can change how its cache works without breaking a conversion (at
-worst the kernels compile once more).
+worst the kernels compile once more). A kernel compiles when it first runs, never at import, so
+that a command compiles only what it runs.
+
+The first conversion after an install compiles the kernels it runs (`FIRST_COMPILE_S`, measured
+with `python -m tests.bench.first_run`); `watch_compiling` lets the command line say so rather
+than sit silent. It listens to numba's public event API (`numba.core.event`).
 """
 
 from __future__ import annotations
 
 import os
+import threading
+import time
 from collections.abc import Callable
-from typing import TypeVar
+from typing import Any, TypeVar
 
 F = TypeVar("F", bound=Callable[..., object])
+
+# seconds the kernels of a conversion take to compile on a 2-core machine with an empty cache
+# (the butterfly, default profile; `python -m tests.bench.first_run`)
+FIRST_COMPILE_S = 24.0
 
 
 def _numba_njit() -> Callable[[F], F] | None:
@@ -37,3 +48,46 @@ def jit(func: F) -> F:
     if _njit is None:
         return func
     return _njit(func)
+
+
+def watch_compiling(after_s: float, notify: Callable[[], None]) -> Any:
+    """Call `notify` once, from a timer thread, when numba has spent `after_s` seconds compiling
+    in this process (loading kernels from the cache takes milliseconds and does not count).
+    Returns the listener (for `numba.core.event.unregister`); None without numba."""
+    if not JIT_ENABLED:
+        return None
+    from numba.core import event
+
+    class CompileWatch(event.Listener):
+        """Adds up the time spent in outermost compilations (a kernel's callees compile inside
+        it); a timer fires `notify` when the total would reach `after_s` while one runs."""
+
+        depth, spent_s, started = 0, 0.0, 0.0
+        timer: threading.Timer | None = None
+        fired = False
+
+        def on_start(self, ev: Any) -> None:
+            self.depth += 1
+            if self.depth == 1:
+                self.started = time.perf_counter()
+                if not self.fired:
+                    self.timer = threading.Timer(max(0.0, after_s - self.spent_s), self.fire)
+                    self.timer.daemon = True
+                    self.timer.start()
+
+        def on_end(self, ev: Any) -> None:
+            self.depth -= 1
+            if self.depth == 0:
+                self.spent_s += time.perf_counter() - self.started
+                if self.timer is not None:
+                    self.timer.cancel()
+                    self.timer = None
+
+        def fire(self) -> None:
+            if not self.fired:
+                self.fired = True
+                notify()
+
+    watch = CompileWatch()
+    event.register("numba:compile", watch)
+    return watch

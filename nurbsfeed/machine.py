@@ -2,7 +2,7 @@
 
 Units live in the key names and are what they say: mm and seconds, whatever the program's unit
 (an inch program's curves are converted to mm when they are read, `CurveBlock.in_mm`). Every key
-has a range (`RANGES`, README "Machine profile keys"): a value that passes is one the planner, the
+has a range (`RANGES`, docs/profiles.md): a value that passes is one the planner, the
 stepping loop and the writer compute with in finite numbers.
 """
 
@@ -12,7 +12,7 @@ import importlib.util
 import math
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field, fields
 from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -42,6 +42,12 @@ class Machine:
     min_block_time_s: float = 0.0  # the controller's floor on one block's time
     # the shortest move from or into a rest (pipeline.RestMoves); 0: a move a period there too
     rest_move_s: float = 0.0
+    # the profile as loaded: its name (built-in name or YAML path) and every key with the value
+    # in force (overrides applied, defaults filled in, per-axis limits only where set), which
+    # `machine_from_mapping` turns back into this machine (the record in each output, design
+    # §5 "Profile record"); the name labels the machine, it is not part of what the machine is
+    name: str = field(default="", compare=False)
+    profile: tuple[tuple[str, float | int | str], ...] = ()
 
     @property
     def controller_period_s(self) -> float:
@@ -71,7 +77,7 @@ JERK_MODELS = ("paper", "path")  # profile key jerk_model (planning.path_model)
 PLANNERS = ("scurve", "optimal", "envelope")
 OPTIMAL_NEEDS_SCIPY = ("planner: optimal needs scipy (its linear programs): "
                        "pip install 'nurbsfeed[optimal]'")
-# The accepted values, ends included (README "Profile keys" says why each is physical).
+# The accepted values, ends included (docs/profiles.md says why each is physical).
 RANGES: dict[str, tuple[float, float]] = {
     "period_s": (1e-6, 1.0),
     "max_feed_mm_s": (1e-3, 1e5),
@@ -141,10 +147,11 @@ def _check_value(key: str, value: Any) -> float | int:
 
 
 def machine_from_mapping(data: Any, where: str, places: Mapping[str, Location] | None = None,
-                         overrides: Mapping[str, Any] | None = None) -> Machine:
+                         overrides: Mapping[str, Any] | None = None, name: str = "") -> Machine:
     """Validate a parsed profile and apply CLI overrides.
 
-    where: the profile's name for messages; places: the location of each key in the file.
+    where: the profile's place for messages; places: the location of each key in the file;
+    name: the profile's name (default: `where`).
     """
     places = places or {}
     here = Location(where)
@@ -176,6 +183,7 @@ def machine_from_mapping(data: Any, where: str, places: Mapping[str, Location] |
                 values[key] = _check_value(key, value)
             except ProfileError as exc:
                 raise ProfileError(f"option --{key.replace('_', '-')}: {exc.message}") from None
+    profile = dict(values)  # as given, before period_s becomes the written move's
     move_periods = int(values.get("move_periods", 1))
     move_s = move_periods * values["period_s"]
     if move_s > MAX_MOVE_S:
@@ -216,7 +224,27 @@ def machine_from_mapping(data: Any, where: str, places: Mapping[str, Location] |
                     _xyz(axis["axis_jerk_mm_s3"]), planner)
     if "decimals" not in values:
         values["decimals"] = auto_decimals(limits, limits.period_s / move_periods)
-    return Machine(limits, **values)  # type: ignore[arg-type]
+    return Machine(limits, **values, name=name or where,  # type: ignore[arg-type]
+                   profile=_in_force(profile, values, jerk_model, planner))
+
+
+def _in_force(given: dict[str, float | int], values: dict[str, float | int], jerk_model: str,
+              planner: str) -> tuple[tuple[str, float | int | str], ...]:
+    """Every profile key with its value in force, jerk_model and planner first, then in
+    FLOAT_KEYS + INT_KEYS order: the given ones, else the Machine's default (`values`: the
+    output settings as the Machine gets them, decimals included); per-axis limits only where
+    given."""
+    defaults: dict[str, Any] = {f.name: f.default for f in fields(Machine)}
+    pairs: list[tuple[str, float | int | str]] = [("jerk_model", jerk_model),
+                                                  ("planner", planner)]
+    for key in FLOAT_KEYS + INT_KEYS:
+        if key in given:
+            pairs.append((key, given[key]))
+        elif key in values:
+            pairs.append((key, values[key]))
+        elif key not in AXIS_KEYS:
+            pairs.append((key, defaults[key]))
+    return tuple(pairs)
 
 
 def _choice(data: dict, key: str, choices: tuple[str, ...], places: Mapping[str, Location],
@@ -383,4 +411,5 @@ def load_machine(name_or_path: str, overrides: Mapping[str, Any] | None = None) 
                            else f"not valid YAML ({problem})", loc) from None
     finally:
         loader.dispose()
-    return machine_from_mapping(data, where, _key_places(node, where), overrides)
+    return machine_from_mapping(data, where, _key_places(node, where), overrides,
+                                name=name_or_path)

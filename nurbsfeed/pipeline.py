@@ -22,6 +22,7 @@ import numpy as np
 
 from nurbsfeed.errors import CurveError, InputError, Location
 from nurbsfeed.files import ENCODING, ERRORS, atomic_output
+from nurbsfeed.gcode.profile_record import record_lines
 from nurbsfeed.gcode.writer import (
     ZERO_LENGTH_COMMENT,
     MoveWriter,
@@ -135,7 +136,7 @@ class RestMoves:
 
     LinuxCNC runs a tangent move shorter than its ramp cutoff (1 / ARC_BLEND_RAMP_FREQ: 10 ms)
     at one constant acceleration, from the speed it enters with to the speed it leaves with, the
-    smaller of its F and the next (README "Running on LinuxCNC"). The first move from a rest is
+    smaller of its F and the next (docs/linuxcnc.md). The first move from a rest is
     entered at 0: it takes twice its planned time. A longer move is run as a trapezoid instead,
     at the machine's acceleration up to its F (at a rest F is small: reached at once). So the
     first planned periods after a rest, and the last before one, are written as one move each.
@@ -298,6 +299,9 @@ def convert_block(block: CurveBlock, index: int, out: BinaryIO, machine: Machine
     if block.rapid_to_start:
         out.write(rapid_line(block.curve.points[0], machine.decimals, block.units).encode("ascii")
                   + eol)
+    if index == 0:  # the profile record: once, before the first curve's comment line
+        out.write(b"".join(comment_line(line, block.semicolon_comments).encode("ascii") + eol
+                           for line in record_lines(machine)))
     comment = cycle_comment(index, block.curve.name, n_points, period_s, method,
                             plan.cycle_time_s, plan.length_mm, block.units)
     out.write(comment_line(comment, block.semicolon_comments).encode(ENCODING, ERRORS) + eol)

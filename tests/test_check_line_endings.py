@@ -1,7 +1,7 @@
 """`nurbsfeed check` splits both programs into lines as a conversion reads them: a program whose
-lines end in "\\r" alone (accepted by convert, README "Accepted as written") is checked line by
-line like its "\\n" twin. It once read such a program as one line (found by tests/fuzz: 7
-violations, pass-through lines and the curve missing)."""
+lines end in "\\r" alone (accepted by convert, docs/refusals.md "Accepted as written") is
+checked line by line like its "\\n" twin. It once read such a program as one line (found by
+tests/fuzz: 7 violations, pass-through lines and the curve missing)."""
 
 from __future__ import annotations
 

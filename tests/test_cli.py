@@ -44,7 +44,10 @@ def test_convert_json_writes_a_complete_program_with_trace(tmp_path: Path) -> No
     text = out.read_text()
     lines = text.splitlines()
     assert lines[1] == "G21 G90" and lines[2] == "G0 X10. Y0. Z0." and lines[-1] == "M2"
-    assert lines[3].startswith("(nurbsfeed: curve 0 quarter-circle-r10, ")
+    record = [line for line in lines if line.startswith("(nurbsfeed profile: ")]
+    assert lines[3:3 + len(record)] == record and record[0].startswith(
+        "(nurbsfeed profile: name paper-table1, nurbsfeed ")
+    assert lines[3 + len(record)].startswith("(nurbsfeed: curve 0 quarter-circle-r10, ")
     rows = list(csv.reader(io.StringIO(trace.read_text())))
     assert rows[0] == ["curve", "k", "t", "u", "s", "v", "a", "j", "x", "y", "z"]
     table = np.array(rows[1:], dtype=float)
@@ -105,9 +108,55 @@ def test_plan_reports_key_points_segments_and_the_bound() -> None:
     code, stdout, _ = run("plan", str(SAMPLES / "butterfly.json"), "-m", "paper-table1")
     assert code == 0
     assert "kappa0 0.1 1/mm; 25 curvature peaks >= kappa0" in stdout
-    assert "time-optimal bound 5.48" in stdout
+    assert "time-optimal bound 5.47" in stdout
     cycle = float(stdout.split("cycle time ")[1].split(" s")[0])
     assert 5.48 < cycle < 7.0
+
+
+@pytest.mark.parametrize(("command", "options"), [
+    ("convert", {"--output", "--machine", "--method", "--dialect", "--trace", "--jobs", "--quiet"}),
+    ("plan", {"--reference", "--machine", "--dialect"}),
+    ("compare", {"--machine", "--dialect", "--repeat", "--json"}),
+    ("check", {"--machine", "--dialect", "--json"}),
+    ("plot", {"--output", "--curve", "--machine", "--method", "--dialect"}),
+])
+def test_each_commands_help_lists_its_own_options_and_an_example(command: str,
+                                                                  options: set[str]) -> None:
+    """Not a line per profile key: the overrides are named once, in a paragraph; each command
+    shows examples of itself; check, which plans nothing, has no --planner."""
+    code, stdout, _ = run(command, "--help")
+    assert code == 0
+    section = stdout.split("Options:\n")[1].split("\n\n")[0]
+    listed = set(re.findall(r"^  (?:-\w, )?(--[a-z-]+)", section, re.M))
+    assert listed == options | {"--help"}
+    examples = stdout.split("Examples:\n")[1].split("\n\n")[0].splitlines()
+    assert examples and all(line.startswith(f"    nurbsfeed {command} ") for line in examples)
+    overrides = stdout.split("Profile overrides")[1]
+    assert "--max-feed-mm-s" in overrides and "--jerk-model paper|path" in overrides
+    assert ("--planner" in overrides) == (command != "check")
+    assert len(stdout.splitlines()) < 40
+
+
+def test_check_refuses_planner_which_it_has_no_use_for() -> None:
+    code, _, stderr = run("check", str(SAMPLES / "butterfly.json"), "x.nc", "--planner",
+                          "optimal")
+    assert code == 2 and "No such option '--planner'" in stderr
+
+
+def test_plans_time_optimal_bound_respects_the_programmed_feed(tmp_path: Path) -> None:
+    """The bound is a lower bound on the cycle under every cap the plan obeys, the programmed F
+    among them: a slow F makes it at least length / F (and the plan, which F caps too, stays
+    above it, by the time it takes to start and stop)."""
+    source = tmp_path / "slow.nc"
+    source.write_text((SAMPLES / "fanuc-quadratic.nc").read_text().replace("F3000.", "F290."))
+    code, stdout, _ = run("plan", str(source))
+    assert code == 0
+    length_mm = float(re.search(r"length ([\d.]+) mm", stdout)[1])
+    bound = float(re.search(r"time-optimal bound ([\d.]+) s", stdout)[1])
+    cycle = float(re.search(r"cycle time ([\d.]+) s", stdout)[1])
+    above = float(re.search(r"planned is \+([\d.]+)%", stdout)[1])
+    assert length_mm / (290.0 / 60.0) <= bound <= cycle
+    assert above < 5.0  # not +3019 %: the machine's 200 mm/s is not what caps this curve
 
 
 def test_plan_reference_is_the_jerk_limited_optimum_on_a_quarter_circle() -> None:
@@ -167,7 +216,7 @@ BAD_JSON = [
      "weights)"),
     ('{"degree": 1, "knots": [0,0,1,1], "control_points": [[0,0],[1,NaN]]}',
      "1:63: not valid JSON: NaN is not a number JSON allows"),
-    # just outside the input envelope (README "Input envelope"), refused before any work
+    # just outside the input envelope (docs/refusals.md "Input envelope"), refused before any work
     ('{"degree": 1000000000000, "knots": [0, 1], "control_points": [[0, 0]]}',
      "1:2: curves[0]: degree 1000000000000 is above 9, the highest nurbsfeed evaluates "
      "accurately"),
@@ -342,17 +391,10 @@ def test_taylor1_conversions_warn_that_they_can_break_the_limits(tmp_path: Path)
     assert stderr == ""
 
 
-def test_progress_bar_only_on_a_terminal(tmp_path: Path) -> None:
-    """Not a terminal (CliRunner): no progress at all. A pseudo-terminal: a bar on stderr.
-    The bar is drawn at the first converted curve (then at most every 0.1 s): two curves show
-    it, and a bar written where no terminal is would show at the first."""
+def _under_a_terminal(*args: str) -> tuple[int, str]:
+    """Run `nurbsfeed` with stderr on a pseudo-terminal: (exit code, everything it showed)."""
     import pty
 
-    big = tmp_path / "big.json"
-    big.write_text(BUTTERFLIES.format(",".join([BUTTERFLY_CURVE] * 2)))
-    code, _, stderr = run("convert", str(big), "-o", str(tmp_path / "a.nc"))
-    assert code == 0 and "\r" not in stderr and "[" not in stderr
-    out = tmp_path / "b.nc"
     chunks: list[bytes] = []
 
     def read(fd: int) -> bytes:
@@ -360,11 +402,50 @@ def test_progress_bar_only_on_a_terminal(tmp_path: Path) -> None:
         chunks.append(data)
         return data
 
-    status = pty.spawn([sys.executable, "-m", "nurbsfeed.cli", "convert", str(big), "-o",
-                        str(out)], read)
-    text = b"".join(chunks).decode()
-    assert os.waitstatus_to_exitcode(status) == 0 and out.exists()
-    assert re.search(r"\rbig\.json \[#*\.*\] +\d+%  \d+ curves, [\d,]+ points", text)
+    status = pty.spawn([sys.executable, "-m", "nurbsfeed.cli", *args], read)
+    return os.waitstatus_to_exitcode(status), b"".join(chunks).decode()
+
+
+STATUS_LINE = re.compile(r"\r(\d+) of (\d+) files, ([\d,]+) points, (\d+) s elapsed, "
+                         r"(~\d+ s left|time left unknown)\x1b\[K")
+
+
+def test_progress_only_on_a_terminal(tmp_path: Path) -> None:
+    """Not a terminal (CliRunner): no progress at all. A pseudo-terminal: one status line,
+    rewritten in place, with files done of total, points, elapsed time and time left; it is
+    drawn at the first converted curve (then at most every 0.1 s), so two curves show it."""
+    big = tmp_path / "big.json"
+    big.write_text(BUTTERFLIES.format(",".join([BUTTERFLY_CURVE] * 2)))
+    code, _, stderr = run("convert", str(big), "-o", str(tmp_path / "a.nc"))
+    assert code == 0 and "\r" not in stderr and "files," not in stderr
+    out = tmp_path / "b.nc"
+    code, text = _under_a_terminal("convert", str(big), "-o", str(out))
+    assert code == 0 and out.exists()
+    lines = STATUS_LINE.findall(text)
+    assert lines[0][:2] == ("0", "1") and lines[-1][:3] == ("1", "1", "10,962")
+    assert text.endswith("\r\x1b[K" + f"{big}: 2 curves, 10,962 points, cycle 10.960 s -> "
+                         f"{out}\r\n")
+
+
+def test_progress_of_a_batch_under_jobs(tmp_path: Path) -> None:
+    """--jobs 2 on a terminal: the status line counts the files as the workers finish them
+    (3 of 3 at the end, with every point), and goes away before the summary."""
+    sources = [SAMPLES / name for name in ("butterfly.json", "circle.json", "quarter-circle.json")]
+    code, text = _under_a_terminal("convert", *map(str, sources), "-o", str(tmp_path / "out"),
+                                   "--jobs", "2")
+    assert code == 0
+    lines = STATUS_LINE.findall(text)
+    assert [line[1] for line in lines] == ["3"] * len(lines)
+    assert [int(line[0]) for line in lines] == sorted(int(line[0]) for line in lines)
+    assert lines[-1][:3] == ("3", "3", f"{5481 + 1746 + 389:,}")  # the summary's points
+    assert lines[-1][4].startswith("~0 s left")
+    assert "\x1b[Kfile " in text and text.rstrip().endswith("3 of 3 files converted")
+
+
+def test_no_progress_under_quiet_on_a_terminal(tmp_path: Path) -> None:
+    code, text = _under_a_terminal("convert", str(SAMPLES / "circle.json"), "-o",
+                                   str(tmp_path / "c.nc"), "-q")
+    assert code == 0 and text == ""
 
 
 BUTTERFLY_CURVE = (SAMPLES / "butterfly.json").read_text().split('"curves": [')[1].rsplit("]", 1)[0]

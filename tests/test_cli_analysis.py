@@ -127,6 +127,69 @@ def test_check_exits_2_on_unreadable_inputs(butterfly_nc: Path, tmp_path: Path) 
     assert stderr.strip() == f"{broken}:1:13: not valid JSON: Expecting value"
 
 
+def test_check_without_m_uses_the_profile_recorded_in_the_output(butterfly_nc: Path) -> None:
+    """The output was made under paper-table1 (not the default): `check` without -m reads that
+    from the output's profile record and passes, as the README's Usage runs it."""
+    code, stdout, stderr = run("check", BUTTERFLY, str(butterfly_nc))
+    assert code == 0 and stderr == ""
+    assert stdout.startswith(f"check {butterfly_nc} against {BUTTERFLY} (machine "
+                             "paper-table1): 1 curve(s), ")
+    assert stdout.splitlines()[-1] == "result: OK: 0 violation(s)"
+
+
+def test_check_under_another_profile_exits_2_and_names_what_differs(butterfly_nc: Path) -> None:
+    """-m default (or an override) against an output made under paper-table1: no check runs
+    (its violations would be the profiles' difference, not the program's), exit 2 at the
+    record, every key that differs named with both values."""
+    record_line = butterfly_nc.read_text().splitlines().index(
+        next(line for line in butterfly_nc.read_text().splitlines()
+             if line.startswith("(nurbsfeed profile: "))) + 1
+    code, stdout, stderr = run("check", BUTTERFLY, str(butterfly_nc), "-m", "default")
+    assert code == 2 and stdout == ""
+    assert stderr.startswith(f"{butterfly_nc}:{record_line}:1: converted under the profile "
+                             "paper-table1 (recorded here), but checked under default, which "
+                             "differs: jerk_model paper -> path; max_feed_mm_s 100.0 -> 200.0; ")
+    assert "max_vel_x_mm_s unset -> 250.0" in stderr and "\n" not in stderr.rstrip("\n")
+    code, stdout, stderr = run("check", BUTTERFLY, str(butterfly_nc), "--max-feed-mm-s", "90")
+    assert code == 2 and stdout == ""
+    assert stderr.rstrip("\n").endswith("which differs: max_feed_mm_s 100.0 -> 90.0 (leave out "
+                                         "-m and the overrides to check under the recorded "
+                                         "profile)")
+    code, _, _ = run("check", BUTTERFLY, str(butterfly_nc), "-m", "paper-table1",
+                     "--max-feed-mm-s", "100")  # the same values: agreed
+    assert code == 0
+
+
+def test_check_refuses_a_profile_record_that_does_not_load(butterfly_nc: Path,
+                                                           tmp_path: Path) -> None:
+    """An edited record goes through the profile's own checks, located at its line."""
+    lines = butterfly_nc.read_text().splitlines(keepends=True)
+    at = next(i for i, line in enumerate(lines) if "max_feed_mm_s" in line)
+    bad = tmp_path / "bad.nc"
+    for wrong, message in ((lines[at].replace("max_feed_mm_s 100.0", "max_feed_mm_s -5.0"),
+                            "'max_feed_mm_s' must be positive and finite, not -5.0"),
+                           (lines[at].replace("max_feed_mm_s 100.0", "max_feed_mm_s"),
+                            "cannot read 'max_feed_mm_s' in the profile record (write 'key "
+                            "value')"),
+                           (lines[at].replace("max_feed_mm_s", "max_speed_mm_s"),
+                            "unknown key 'max_speed_mm_s'")):
+        bad.write_text("".join(lines[:at] + [wrong] + lines[at + 1:]))
+        code, stdout, stderr = run("check", BUTTERFLY, str(bad))
+        assert code == 2 and stdout == ""
+        assert stderr.startswith(f"{bad}:{at + 1}:1: ") and message in stderr
+
+
+def test_check_of_an_output_without_a_record_uses_m(butterfly_nc: Path, tmp_path: Path) -> None:
+    """A program converted before the record existed: checked under -m (the default profile
+    without one), as before."""
+    old = tmp_path / "old.nc"
+    old.write_text("".join(line for line in butterfly_nc.read_text().splitlines(True)
+                           if not line.startswith("(nurbsfeed profile: ")))
+    assert run("check", BUTTERFLY, str(old), "-m", "paper-table1")[0] == 0
+    code, stdout, _ = run("check", BUTTERFLY, str(old))
+    assert code == 1 and "(machine default)" in stdout.splitlines()[0]
+
+
 def test_plot_writes_a_png(tmp_path: Path) -> None:
     pytest.importorskip("matplotlib")  # the optional `plot` extra
     out = tmp_path / "quarter.png"

@@ -79,6 +79,18 @@ def test_a_crash_in_one_file_fails_its_row_and_the_others_are_converted(
     assert stderr.endswith("2 of 3 files converted\n")
 
 
+def test_quiet_prints_only_the_files_that_failed(tmp_path: Path) -> None:
+    """-q: nothing when all convert; when one fails, its line and the count, not the table."""
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"curves": [')
+    out = tmp_path / "out"
+    assert run("convert", QUARTER, CIRCLE, "-o", out, "-q") == (0, "", "")
+    code, stdout, stderr = run("convert", QUARTER, bad, CIRCLE, "-o", out, "-q")
+    assert (code, stdout) == (2, "")
+    assert stderr == (f"{bad}:1:13: not valid JSON: Expecting value\n"
+                      "2 of 3 files converted\n")
+
+
 def test_a_crash_converting_a_single_input_is_one_line_with_the_file(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(nurbsfeed.pipeline, "convert_file", crash_on(QUARTER.name, boom))
@@ -115,13 +127,33 @@ def test_two_inputs_writing_the_same_output_refuse_the_batch(tmp_path: Path) -> 
         (tmp_path / folder / name).write_bytes(QUARTER.read_bytes())
     out = tmp_path / "out"
     for first, second in [("d1/x.nc", "d2/x.nc"), ("d3/x.json", "d1/x.nc"),
-                          ("d3/X.nc", "d3/x.json"), ("d1/x.nc", "d1/x.nc")]:
+                          ("d3/X.nc", "d3/x.json")]:
         a, b = tmp_path / first, tmp_path / second
         code, _, stderr = run("convert", a, b, "-o", out)
         target = out / "x.nc"  # the second writer's name (X.nc and x.nc count as one)
         assert (code, stderr) == (2, f"{target}: both {a} and {b} would be written here "
                                      "(rename one, or convert them in separate runs)\n")
         assert not out.exists()  # refused before anything was converted or created
+
+
+def test_the_same_input_given_twice_is_named_as_such(tmp_path: Path) -> None:
+    """Twice by the same name, or by another (a directory, a path through ..): the message
+    says the input is given twice, not that two files would write one output. (A link of
+    another name is an input of its own: it writes an output of its own.)"""
+    (tmp_path / "d1").mkdir()
+    src = tmp_path / "d1" / "x.nc"
+    src.write_bytes(QUARTER.read_bytes())
+    out = tmp_path / "out"
+    for again in [src, tmp_path / "d1"]:  # the directory lists it by the same name
+        assert run("convert", src, again, "-o", out) == (
+            2, "", f"{src}: this input is given twice: give each input once (a directory and a "
+                   "glob can both name it)\n")
+    up = tmp_path / "d1" / ".."
+    for second in [up / "d1" / "x.nc", up / ".." / tmp_path.name / "d1" / "x.nc"]:
+        assert run("convert", src, second, "-o", out) == (
+            2, "", f"{second}: this input is given twice (as {src} and as {second}): give each "
+                   "input once (a directory and a glob can both name it)\n")
+    assert not out.exists()
 
 
 def test_an_output_that_is_an_input_is_refused_by_any_name(tmp_path: Path) -> None:

@@ -1,4 +1,4 @@
-"""A derandomized slice of the fuzzing tier (README "Fuzzing"): a few hundred generated and
+"""A derandomized slice of the fuzzing tier (docs/testing.md "Fuzzing"): a few hundred generated and
 mutated inputs through `nurbsfeed convert`, each of which must convert into a program that keeps
 every other line, or be refused with a located message and no output (tests/fuzz/oracle.py).
 Failures recorded in tests/fuzz/findings/ (code owned elsewhere) are tolerated, no others.

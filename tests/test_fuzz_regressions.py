@@ -1,5 +1,5 @@
-"""Bugs the fuzzing tier (tests/fuzz, README "Fuzzing") found in the G-code readers, one test
-each, through the command line as the fuzzer saw them."""
+"""Bugs the fuzzing tier (tests/fuzz, docs/testing.md "Fuzzing") found in the G-code readers,
+one test each, through the command line as the fuzzer saw them."""
 
 from __future__ import annotations
 

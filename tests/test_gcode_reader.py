@@ -147,7 +147,8 @@ def test_linuxcnc_g62_with_q_and_g62_knot_lines() -> None:
 
 
 def test_orders_at_the_envelope_edge_are_read() -> None:
-    """P10 / L10 (degree 9), the highest order nurbsfeed accepts (README "Input envelope");
+    """P10 / L10 (degree 9), the highest order nurbsfeed accepts (docs/refusals.md, "Input
+    envelope");
     P11 / L11 are refused at the word (tests/data/bad_gcode/*-order-above-envelope.nc)."""
     points = [[float(i), float(i % 3), 0.0] for i in range(10)]
     g62 = PREAMBLE + "G6.2 P10 Q1 K0 X0 Y0 F1200\n" + "".join(

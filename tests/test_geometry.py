@@ -217,7 +217,7 @@ def test_refined_curvature_peaks_are_the_maxima_around_them(seed: int) -> None:
         assert grid.kappa_1_mm[node] >= dense * (1 - 1e-9)
 
 
-# ---- the input envelope (README "Input envelope"; measured by tests/bench/envelope.py) --------
+# ---- the input envelope (docs/refusals.md; measured by tests/bench/envelope.py) ----------------
 def envelope_edges() -> dict[str, tuple]:
     """(degree, knots, points, weights) of curves at each edge of the envelope, just inside."""
     rng = np.random.default_rng(41)

@@ -144,13 +144,20 @@ def check_independently(name: str, profile_name: str, text: str) -> None:
     assert golden[:len(before)] == before
     assert golden[len(golden) - len(after):] == after
     made = [line.rstrip("\n") for line in golden[len(before):len(golden) - len(after)]]
+    limits = profile(profile_name)
+    record = [line for line in made if line.startswith("(nurbsfeed profile: ")]
+    assert made[:len(record)] == record  # the profile record first, then the comment
+    recorded = dict(pair.split(" ") for line in record
+                    for pair in line[len("(nurbsfeed profile: "):-1].split(", "))
+    assert recorded["name"] == profile_name
+    assert all(float(recorded[key]) == value if isinstance(value, (int, float))
+               else recorded[key] == value for key, value in limits.items())
+    made = made[len(record):]
     comment = COMMENT.fullmatch(made[0])
     assert comment, made[0]
     assert made[-1] == case.restored
     lines = made[1:-1]
     assert lines[0].startswith("G1 ") and all(line and MOVE.fullmatch(line) for line in lines)
-
-    limits = profile(profile_name)
     # a profile without `decimals` lets nurbsfeed choose them (machine.auto_decimals): the
     # rounding allowance then follows the finest digit written, which the check below bounds
     written_digits = max(len(number.split(".")[1]) for line in lines

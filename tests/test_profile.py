@@ -322,3 +322,42 @@ def test_the_linuxcnc_profile_keeps_every_axis_within_the_machines_acceleration(
     limits = load_machine("linuxcnc").limits
     assert math.hypot(limits.acc_mm_s2, limits.normal_acc_mm_s2) <= 1000.0
     assert limits.feed_mm_s <= 200.0
+
+
+@pytest.mark.parametrize("name, overrides", [
+    ("default", {}), ("paper-table1", {}), ("linuxcnc", {}),
+    ("default", {"max_feed_mm_s": 123.456789012345, "decimals": 6, "jerk_model": "path"}),
+    ("linuxcnc", {"period_s": 0.00025, "move_periods": 7, "min_block_time_s": 0.0017}),
+])
+def test_the_profile_record_loads_back_into_the_same_machine(name: str, overrides: dict) -> None:
+    """Every key in the record, floats to the last bit, lines short enough for a controller:
+    read back through the profile's own checks it is the machine the program was made with."""
+    from nurbsfeed.gcode.profile_record import RECORD_WIDTH, differences, read_record, record_lines
+
+    machine = load_machine(name, overrides)
+    lines = record_lines(machine)
+    assert all(line.startswith("(nurbsfeed profile: ") and line.endswith(")")
+               and len(line) <= RECORD_WIDTH and line.count("(") == 1 for line in lines)
+    recorded = read_record(["%\n", "O1\n"] + [line + "\r\n" for line in lines] + ["G1 X1.\n"],
+                           "out.nc")
+    assert recorded is not None and recorded.location.line == 3
+    assert recorded.machine == machine and recorded.name == name
+    assert differences(recorded.machine, machine) == []
+    other = load_machine(name, {**overrides, "chord_error_mm": 0.0042})
+    assert differences(machine, other) == [
+        f"chord_error_mm {machine.limits.chord_mm!r} -> 0.0042"]
+
+
+def test_a_profile_file_name_is_recorded_in_characters_a_comment_takes(tmp_path: Path) -> None:
+    from nurbsfeed.gcode.profile_record import read_record, record_lines
+
+    path = tmp_path / "my (odd) mill.yaml"
+    path.write_text((ROOT / "configs" / "default.yaml").read_text())
+    lines = record_lines(load_machine(str(path)))
+    assert lines[0] == ("(nurbsfeed profile: name my__odd__mill.yaml, nurbsfeed 0.1.0, "
+                        "jerk_model path, planner scurve)")
+    long = tmp_path / ("x" * 200 + ".yaml")
+    long.write_text(path.read_text())
+    assert record_lines(load_machine(str(long)))[0] == f"(nurbsfeed profile: name {'x' * 60})"
+    recorded = read_record(lines, "out.nc")
+    assert recorded is not None and recorded.machine.profile == load_machine("default").profile

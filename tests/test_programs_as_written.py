@@ -41,6 +41,7 @@ def test_linuxcnc_reference_example_converts_without_its_unset_axis(tmp_path: Pa
     written = out.splitlines()
     comment = next(i for i, line in enumerate(written) if line.startswith("(nurbsfeed: curve"))
     moves = written[comment + 1:-2]  # up to the restored F and M2
+    record = next(i for i, line in enumerate(written) if line.startswith("(nurbsfeed profile"))
     assert len(moves) > 100
     assert moves[0].startswith("G1 ")
     assert not any(re.search(unset, move) for move in moves)
@@ -48,7 +49,8 @@ def test_linuxcnc_reference_example_converts_without_its_unset_axis(tmp_path: Pa
     assert {letter for move in moves for letter in re.findall("[XYZ]", move)} == set(plane)
     # everything else passes through byte for byte
     source_lines = source.read_text().splitlines()
-    assert written[:comment] == source_lines[:comment]
+    assert written[:record] == source_lines[:record]
+    assert all(line.startswith("(nurbsfeed profile: ") for line in written[record:comment])
     assert written[-2:] == ["F100.", "M2"]
 
 
@@ -108,8 +110,8 @@ def test_lines_inside_a_nurbs_block_are_kept_in_order_before_its_moves(
                                 catch_exceptions=False)
     assert result.exit_code == 0, result.stderr
     out = target.read_bytes().decode()
-    comment = out.index("(nurbsfeed: curve 0")
-    assert out[:comment].endswith(kept)
+    record = out.index("(nurbsfeed profile: ")  # then the comment of curve 0
+    assert out[:record].endswith(kept)
     assert out.count(kept) == 1
     check = CliRunner().invoke(main, ["check", str(source), str(target)], catch_exceptions=False)
     assert check.exit_code == 0, check.stdout

@@ -16,7 +16,8 @@ this reader follows the interpreter, since that is what a machine does:
   Control Point"; the docs' "default weight 1" is not what the interpreter does).
 - The order is 3 unless an L above 3 is given (smaller L is ignored by the interpreter; here it is
   an error, since it cannot mean what was written); the last L in the block wins. LinuxCNC sets
-  no maximum; nurbsfeed refuses an L above nurbs_block.MAX_ORDER (README "Input envelope").
+  no maximum; nurbsfeed refuses an L above nurbs_block.MAX_ORDER (docs/refusals.md, "Input
+  envelope").
 - Knots are uniform, clamped, integer: with n + 1 control points of order k,
   `order zeros, 1 .. n-k+1, order copies of n-k+2` (knot_vector_creator).
 - G5.3 without G5.2 is an error; so are fewer control points (counting the start point) than the

@@ -25,7 +25,7 @@ from nurbsfeed.gcode.tokenizer import Block, Word, param_label
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.geometry.nurbs import MAX_DEGREE, far_control_point, far_message
 
-MAX_ORDER = MAX_DEGREE + 1  # the highest P / L accepted (README "Input envelope")
+MAX_ORDER = MAX_DEGREE + 1  # the highest P / L accepted (docs/refusals.md "Input envelope")
 
 
 @dataclass(frozen=True)

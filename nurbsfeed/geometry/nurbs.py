@@ -8,13 +8,13 @@ once per curve (`span_polynomials`, cached here) and evaluated by Horner's rule,
 (`eval_many`) or per parameter in the planning grid and the stepping loop; they are checked against
 a textbook evaluator that lives in the tests.
 
-`build` refuses curves outside the input envelope below (README "Input envelope"; the numbers
-come from `python -m tests.bench.envelope`, which compares this evaluation with an exact rational
-one and converts curves at and beyond each limit). Inside it, two rescalings that do not change
-the curve keep every number the kernels see well scaled: the knots are mapped affinely onto
-[0, 1] (a NURBS curve does not depend on an affine change of its parameter; `input_u` maps back
-for anything shown to the user), and the weights are multiplied by a power of two, exactly, so
-that the largest lies in [1, 2) (C depends only on the weights' ratios).
+`build` refuses curves outside the input envelope below (docs/refusals.md, "Input envelope";
+the numbers come from `python -m tests.bench.envelope`, which compares this evaluation with an
+exact rational one and converts curves at and beyond each limit). Inside it, two rescalings that
+do not change the curve keep every number the kernels see well scaled: the knots are mapped
+affinely onto [0, 1] (a NURBS curve does not depend on an affine change of its parameter;
+`input_u` maps back for anything shown to the user), and the weights are multiplied by a power
+of two, exactly, so that the largest lies in [1, 2) (C depends only on the weights' ratios).
 """
 
 from __future__ import annotations

@@ -1,1 +1,1 @@
-"""The fuzzing tier (README "Fuzzing"): generated and mutated inputs through the CLI."""
+"""The fuzzing tier (docs/testing.md "Fuzzing"): generated and mutated inputs through the CLI."""

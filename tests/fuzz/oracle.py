@@ -33,6 +33,7 @@ from nurbsfeed.cli import main
 TIME_LIMIT_S = 10.0
 CHECK_TIME_LIMIT_S = 60.0  # `check` of a slow inch curve (70,000 moves) takes seconds
 CURVE_COMMENT = b"(nurbsfeed: curve "
+PROFILE_RECORD = b"(nurbsfeed profile: "  # gcode.profile_record
 ZERO_LENGTH = b"(nurbsfeed: zero-length curve, no move written)"
 _MOVE_WORD = rb"[XYZF]-?[0-9]*\.?[0-9]*"
 _GENERATED = re.compile(rb"(?:G1 )?" + _MOVE_WORD + rb"(?: " + _MOVE_WORD + rb")*|G90|G91")
@@ -158,6 +159,9 @@ def pass_through_problem(source: bytes, output: bytes) -> str | None:
             segments.append([])
         else:
             segments[-1].append(line)
+    # the profile record: nurbsfeed's own lines just before the first curve's comment
+    while len(segments) > 1 and segments[0] and segments[0][-1].startswith(PROFILE_RECORD):
+        segments[0].pop()
     at = _match(segments[0], src, 0)
     if at is None:
         return _first_mismatch(segments[0], src, 0)
@@ -268,8 +272,8 @@ def check_case(folder: Path, source_name: str, data: bytes, profile: bytes | Non
             problem = "exit 0 without an output file"
         else:
             output = target.read_bytes()
-            # the reader's rule (README, Input): a .json file, or any whose first character
-            # other than white space is "{" (a sample spliced whole into an .ngc is JSON)
+            # the reader's rule (docs/programs.md, Inputs): a .json file, or any whose first
+            # character other than white space is "{" (a sample spliced whole into an .ngc is JSON)
             is_json = source.suffix.lower() == ".json" or data.lstrip().startswith(b"{")
             problem = (json_program_problem(output) if is_json
                        else pass_through_problem(data, output))

@@ -7,6 +7,14 @@ N30 G0 G54 X0. Y0. S12000 M3
 N40 G43 H1 Z5. M8
 N50 G1 Z-0.5 F800.
 N60 G05.1 Q1
+(nurbsfeed profile: name default, nurbsfeed 0.1.0, jerk_model path, planner envelope)
+(nurbsfeed profile: period_s 0.001, max_feed_mm_s 200.0, chord_error_mm 0.001, max_acc_mm_s2 2000.0)
+(nurbsfeed profile: max_jerk_mm_s3 50000.0, max_normal_acc_mm_s2 2000.0)
+(nurbsfeed profile: max_normal_jerk_mm_s3 50000.0, max_curve_time_s 3600.0, min_block_time_s 0.0)
+(nurbsfeed profile: rest_move_s 0.0, max_vel_x_mm_s 250.0, max_vel_y_mm_s 250.0)
+(nurbsfeed profile: max_vel_z_mm_s 150.0, max_acc_x_mm_s2 2500.0, max_acc_y_mm_s2 2500.0)
+(nurbsfeed profile: max_acc_z_mm_s2 1500.0, max_jerk_x_mm_s3 50000.0, max_jerk_y_mm_s3 50000.0)
+(nurbsfeed profile: max_jerk_z_mm_s3 30000.0, decimals 5, feed_decimals 3, move_periods 1)
 (nurbsfeed: curve 0 N70 line 10, 1739 points, period 1 ms, rk2c, length 82.515 mm, planned cycle 1.738 s)
 G1 Y0.00001 F0.6
 X0.00004 Y0.00006 F3.8419

@@ -7,6 +7,11 @@ N30 G0 G54 X0. Y0. S12000 M3
 N40 G43 H1 Z5. M8
 N50 G1 Z-0.5 F800.
 N60 G05.1 Q1
+(nurbsfeed profile: name paper-table1, nurbsfeed 0.1.0, jerk_model paper, planner scurve)
+(nurbsfeed profile: period_s 0.001, max_feed_mm_s 100.0, chord_error_mm 0.001, max_acc_mm_s2 1000.0)
+(nurbsfeed profile: max_jerk_mm_s3 10000.0, max_normal_acc_mm_s2 1000.0)
+(nurbsfeed profile: max_normal_jerk_mm_s3 10000.0, max_curve_time_s 3600.0, min_block_time_s 0.0)
+(nurbsfeed profile: rest_move_s 0.0, decimals 4, feed_decimals 3, move_periods 1)
 (nurbsfeed: curve 0 N70 line 10, 1793 points, period 1 ms, rk2c, length 82.515 mm, planned cycle 1.792 s)
 G1 X0.0001 Y0.0001 F2.1213
 Y0.0002 F6.

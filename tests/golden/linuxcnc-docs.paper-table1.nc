@@ -10,6 +10,11 @@ G0 Z0.2
 G0 X0 Y0 (rapid move)
 G1 Z-0.02 F10
 F60 (set feed rate)
+(nurbsfeed profile: name paper-table1, nurbsfeed 0.1.0, jerk_model paper, planner scurve)
+(nurbsfeed profile: period_s 0.001, max_feed_mm_s 100.0, chord_error_mm 0.001, max_acc_mm_s2 1000.0)
+(nurbsfeed profile: max_jerk_mm_s3 10000.0, max_normal_acc_mm_s2 1000.0)
+(nurbsfeed profile: max_normal_jerk_mm_s3 10000.0, max_curve_time_s 3600.0, min_block_time_s 0.0)
+(nurbsfeed profile: rest_move_s 0.0, decimals 4, feed_decimals 3, move_periods 1)
 (nurbsfeed: curve 0 line 13, 5929 points, period 1 ms, rk2c, length 5.827 in, planned cycle 5.928 s)
 G1 Y0.00001 F0.12
 Y0.00002 F0.3

@@ -8,6 +8,14 @@ M8
 G0 Z5
 G0 X0 Y0
 G1 Z-1 F500
+(nurbsfeed profile: name default, nurbsfeed 0.1.0, jerk_model path, planner envelope)
+(nurbsfeed profile: period_s 0.001, max_feed_mm_s 200.0, chord_error_mm 0.001, max_acc_mm_s2 2000.0)
+(nurbsfeed profile: max_jerk_mm_s3 50000.0, max_normal_acc_mm_s2 2000.0)
+(nurbsfeed profile: max_normal_jerk_mm_s3 50000.0, max_curve_time_s 3600.0, min_block_time_s 0.0)
+(nurbsfeed profile: rest_move_s 0.0, max_vel_x_mm_s 250.0, max_vel_y_mm_s 250.0)
+(nurbsfeed profile: max_vel_z_mm_s 150.0, max_acc_x_mm_s2 2500.0, max_acc_y_mm_s2 2500.0)
+(nurbsfeed profile: max_acc_z_mm_s2 1500.0, max_jerk_x_mm_s3 50000.0, max_jerk_y_mm_s3 50000.0)
+(nurbsfeed profile: max_jerk_z_mm_s3 30000.0, decimals 5, feed_decimals 3, move_periods 1)
 (nurbsfeed: curve 0 line 11, 1785 points, period 1 ms, rk2c, length 71.906 mm, planned cycle 1.784 s)
 G1 Y0.00001 F0.6
 X0.00002 Y0.00006 F3.2311

@@ -8,6 +8,11 @@ M8
 G0 Z5
 G0 X0 Y0
 G1 Z-1 F500
+(nurbsfeed profile: name paper-table1, nurbsfeed 0.1.0, jerk_model paper, planner scurve)
+(nurbsfeed profile: period_s 0.001, max_feed_mm_s 100.0, chord_error_mm 0.001, max_acc_mm_s2 1000.0)
+(nurbsfeed profile: max_jerk_mm_s3 10000.0, max_normal_acc_mm_s2 1000.0)
+(nurbsfeed profile: max_normal_jerk_mm_s3 10000.0, max_curve_time_s 3600.0, min_block_time_s 0.0)
+(nurbsfeed profile: rest_move_s 0.0, decimals 4, feed_decimals 3, move_periods 1)
 (nurbsfeed: curve 0 line 11, 1856 points, period 1 ms, rk2c, length 71.906 mm, planned cycle 1.855 s)
 G1 Y0.0001 F1.5
 X0.0001 Y0.0002 F8.4853

@@ -11,7 +11,7 @@ sample in that stretch from the exact curve (nurbsfeed's own projection, the one
 The first and the last move are left out of that ratio because the machine's departure and
 arrival are only known to a servo period; the rest-to-rest ratio takes them in (the machine's
 time from the last sample at the start to the first at the end over the planned cycle), to a
-servo period: it shows what a move from or into rest costs (README "Running on LinuxCNC"). It
+servo period: it shows what a move from or into rest costs (docs/linuxcnc.md). It
 means that only where the machine stands at the curve start and end: LinuxCNC blends a tangent
 move before or after a curve into it, and a curve entered or left in motion shows less.
 """

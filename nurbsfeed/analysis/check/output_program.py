@@ -12,6 +12,7 @@ import numpy as np
 
 from nurbsfeed.analysis.check.report import Findings
 from nurbsfeed.files import InputFile
+from nurbsfeed.gcode.profile_record import RECORD_START, SEMICOLON_START
 from nurbsfeed.gcode.writer import ZERO_LENGTH_COMMENT, rapid_line
 from nurbsfeed.machine import Machine
 from nurbsfeed.program import CurveBlock, PassThrough
@@ -86,12 +87,20 @@ def source_tokens(path: Path, machine: Machine, dialect: str
 def parse_output(lines: list[str], blocks: list[CurveBlock], following: dict[int, list[str]],
                  findings: Findings) -> tuple[list[Token], list[int], list[Section]]:
     """Output lines -> tokens, their line numbers, and the curve sections. A section is a
-    nurbsfeed comment line and the moves after it."""
+    nurbsfeed comment line and the moves after it. The profile record's lines before the first
+    section are nurbsfeed's, not the source's (the CLI reads them)."""
     tokens: list[Token] = []
     token_lines: list[int] = []
-    sections = []
+    sections: list[Section] = []
     i = 0
     while i < len(lines):
+        if not sections and lines[i].startswith((RECORD_START, SEMICOLON_START)):
+            after = i
+            while after < len(lines) and lines[after].startswith((RECORD_START,
+                                                                  SEMICOLON_START)):
+                after += 1
+            if after < len(lines) and COMMENT_RE.match(body(lines[after])):
+                i = after
         match = COMMENT_RE.match(body(lines[i]))
         if match is None:
             tokens.append(("line", lines[i]))
