@@ -896,6 +896,9 @@ def run() -> None:
     try:
         main()
     except Interrupted as exc:
+        from nurbsfeed.files import remove_live_temporaries
+
+        remove_live_temporaries()
         click.echo(f"nurbsfeed: stopped by {signal.Signals(exc.signum).name}", err=True)
         sys.exit(exc.exit_code)
 

@@ -128,6 +128,7 @@ _CREATE_MODE = _umask_mode()
 # redirection, so it is written into, never replaced (`-o /dev/stdout >> log` must append).
 _DESCRIPTOR_PATH = re.compile(r"/dev/(stdout|stderr|fd/\d+)|/proc/(self|thread-self|\d+)/fd/\d+")
 _STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
+_LIVE: set[str] = set()  # the temporary outputs this process holds (atomic_output)
 _KIND_NAMES = {stat.S_IFDIR: "a directory", stat.S_IFBLK: "a block device",
                stat.S_IFSOCK: "a socket"}
 
@@ -184,6 +185,7 @@ def atomic_output(path: Path | None) -> Iterator[BinaryIO]:
             handle = tempfile.NamedTemporaryFile(  # noqa: SIM115 (closed and removed below)
                 "w+b", dir=folder, prefix=prefix,
                 suffix=".part", delete=False)
+            _LIVE.add(handle.name)
         finally:
             signal.pthread_sigmask(signal.SIG_SETMASK, held)
         with handle:
@@ -203,8 +205,21 @@ def atomic_output(path: Path | None) -> Iterator[BinaryIO]:
             os.replace(handle.name, final)
         else:
             os.unlink(handle.name)
+        _LIVE.discard(handle.name)
     except BaseException:
         if handle is not None:
             with contextlib.suppress(OSError):
                 os.unlink(handle.name)
+            _LIVE.discard(handle.name)
         raise
+
+
+def remove_live_temporaries() -> None:
+    """Remove every temporary output this process still holds. A stop signal that lands in
+    the instant between the file's creation and the caller's `with` holding it (inside
+    contextlib's __enter__) leaves the cleanup above no frame to run in: the signal's exit
+    path calls this (cli.run)."""
+    for name in list(_LIVE):
+        with contextlib.suppress(OSError):
+            os.unlink(name)
+        _LIVE.discard(name)

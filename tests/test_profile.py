@@ -355,7 +355,7 @@ def test_a_profile_file_name_is_recorded_in_characters_a_comment_takes(tmp_path:
     path.write_text((ROOT / "configs" / "default.yaml").read_text())
     lines = record_lines(load_machine(str(path)))
     assert lines[0] == ("(nurbsfeed profile: name my__odd__mill.yaml, nurbsfeed 0.1.0, "
-                        "jerk_model path, planner scurve)")
+                        "jerk_model path, planner envelope)")
     long = tmp_path / ("x" * 200 + ".yaml")
     long.write_text(path.read_text())
     assert record_lines(load_machine(str(long)))[0] == f"(nurbsfeed profile: name {'x' * 60})"

@@ -196,7 +196,11 @@ def test_the_sample_passes_every_other_line_through_and_comments_with_semicolons
     kept = [line for line in source if line not in spline]
     assert [line for line in out if line in source] == kept
     assert not any(line.startswith("(") for line in out)
-    assert out[out.index("N80 G1 Z-1. F600.") + 1].startswith("; nurbsfeed: curve 0 N90 ")
+    # the profile record, in ';' comments too, then the curve's comment line
+    after = out[out.index("N80 G1 Z-1. F600.") + 1:]
+    record = [line for line in after if line.startswith("; nurbsfeed profile: ")]
+    assert record and after[:len(record)] == record
+    assert after[len(record)].startswith("; nurbsfeed: curve 0 N90 ")
     assert out[out.index("N160 G1 X55. Y0.") - 1] == "F1500."
 
 

@@ -288,11 +288,13 @@ def _row_pass(c, rows, first, last):
                 gamma = rows[k, r, 3]
                 if gamma == np.inf:
                     continue
+                have = rows[k, r, 0] * c[k - 1] + rows[k, r, 1] * c[k] + rows[k, r, 2] * c[k + 1]
+                if have <= 0.0:  # (gamma >= 0: held, and no square root to take)
+                    continue
                 # the jerk's budget over sqrt(b) at the row's point as it is now (it relaxes
                 # as b falls)
                 gamma /= math.sqrt(max(rows[k, r, 4] * c[k - 1] + rows[k, r, 5] * c[k]
                                        + rows[k, r, 6] * c[k + 1], 1e-300))
-                have = rows[k, r, 0] * c[k - 1] + rows[k, r, 1] * c[k] + rows[k, r, 2] * c[k + 1]
                 if have <= gamma:
                     continue
                 # the coefficient ahead in the sweep if its weight is within PICK_SHARE of the

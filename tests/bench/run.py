@@ -1,7 +1,8 @@
 """Benchmarks of nurbsfeed (issue 5), printed as a table. Run from the repository root:
 
-    python -m tests.bench.run            # the full set (~1 min)
+    python -m tests.bench.run            # the full set
     python -m tests.bench.run --quick    # smaller programs, for a smoke run
+    python -m tests.bench.run --sizes 100 --runs 3   # programs of these sizes, runs of each
 
 1. Stepping kernels: microseconds per step for each method on the butterfly with paper-table1
    (the compiled kernel alone, median of repeated runs after a warm-up).
@@ -16,6 +17,10 @@
    and 3 curves (tests/bench/programs.py), once: its wall time and peak RSS, which must not grow
    with the input (the reader streams).
 4. Cold start: `nurbsfeed convert` of a small sample with a warm numba cache (median of 5).
+5. Phases: per curve of the samples and the butterfly under the default profile, in one
+   process with a warm cache, the time to plan (`pipeline.plan_block`, the envelope's check of
+   its points included), to step (`interpolate.Stepping`) and to write (`MoveWriter`), side by
+   side, median of PHASE_RUNS.
 Speed is measured here, never asserted in the test suite.
 """
 
@@ -44,6 +49,9 @@ from tests.conftest import default_paper_profile, law_increments
 ROOT = Path(__file__).resolve().parents[2]
 REPEATS = 30
 END_TO_END_RUNS = 5  # the machine is shared: report the median and the range
+PHASE_RUNS = 5
+PHASE_SAMPLES = ("quarter-circle.json", "circle.json", "butterfly.json",
+                 "fanuc-multi-curve.nc", "linuxcnc-nurbs-xy.ngc")
 PASS_THROUGH_MB = 200
 
 
@@ -96,7 +104,40 @@ def run_convert(args: list[str]) -> tuple[float, int]:
     return wall, usage.ru_maxrss
 
 
-def end_to_end(n_curves: int, folder: Path, profile: Path | None = None) -> dict[str, float]:
+def phases() -> list[tuple[str, int, float, float, float]]:
+    """Per curve of PHASE_SAMPLES under the default profile: name, points, and the median
+    seconds to plan, to step and to write it."""
+    from nurbsfeed.analysis.common import curve_blocks
+    from nurbsfeed.gcode.writer import MoveWriter
+    from nurbsfeed.interpolate import Stepping
+    from nurbsfeed.pipeline import plan_block
+
+    machine = load_machine("default")
+    rows = []
+    for name in PHASE_SAMPLES:
+        for k, block in enumerate(curve_blocks(ROOT / "samples" / name)):
+            times: list[tuple[float, float, float]] = []
+            for _ in range(PHASE_RUNS + 1):  # the first fills the numba cache
+                start = time.perf_counter()
+                plan = plan_block(block, machine)
+                planned = time.perf_counter()
+                chunks = [chunk.points for chunk in Stepping(plan, "rk2c").chunks()]
+                stepped = time.perf_counter()
+                with open(os.devnull, "wb") as sink:
+                    writer = MoveWriter(sink, machine.decimals, machine.feed_decimals,
+                                        plan.limits.period_s, "\n", block.curve.points[0])
+                    for points in chunks:
+                        writer.add_points(points)
+                    writer.end_curve()
+                written = time.perf_counter()
+                times.append((planned - start, stepped - planned, written - stepped))
+            median = [statistics.median(t[i] for t in times[1:]) for i in range(3)]
+            rows.append((f"{name} {k}" if k else name, plan.n_periods + 1, *median))
+    return rows
+
+
+def end_to_end(n_curves: int, folder: Path, profile: Path | None = None,
+               runs: int = END_TO_END_RUNS) -> dict[str, float]:
     """END_TO_END_RUNS conversions of an n-curve program (numba cache warm) under the default
     profile or the one given: the median run, and the points per second of the slowest and the
     fastest."""
@@ -104,9 +145,9 @@ def end_to_end(n_curves: int, folder: Path, profile: Path | None = None) -> dict
     src.write_text(fanuc_program(n_curves))
     out = folder / f"out-{n_curves}.nc"
     machine = ["-m", str(profile)] if profile else []
-    runs = sorted((run_convert([str(src), "-o", str(out), "-q", *machine])
-                   for _ in range(END_TO_END_RUNS)), key=lambda run: run[0])
-    wall, rss_kib = runs[len(runs) // 2]
+    done = sorted((run_convert([str(src), "-o", str(out), "-q", *machine])
+                   for _ in range(runs)), key=lambda run: run[0])
+    wall, rss_kib = done[len(done) // 2]
     points = 0
     with out.open() as handle:
         for line in handle:
@@ -116,8 +157,8 @@ def end_to_end(n_curves: int, folder: Path, profile: Path | None = None) -> dict
     out.unlink()
     return {"curves": n_curves, "points": points, "wall_s": wall, "points_per_s": points / wall,
             "model": " under the paper model" if profile else "",
-            "slowest": points / runs[-1][0], "fastest": points / runs[0][0],
-            "rss_mb": max(run[1] for run in runs) / 1024, "output_mb": out_mb}
+            "slowest": points / done[-1][0], "fastest": points / done[0][0],
+            "rss_mb": max(run[1] for run in done) / 1024, "output_mb": out_mb, "runs": runs}
 
 
 def warm_up(folder: Path) -> None:
@@ -149,18 +190,23 @@ def cold_start(folder: Path) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small programs only")
-    quick = parser.parse_args().quick
-    sizes = (50, 100) if quick else (325, 650)
+    parser.add_argument("--sizes", type=int, nargs="+", help="curves of each program")
+    parser.add_argument("--runs", type=int, default=END_TO_END_RUNS,
+                        help="conversions of each program (the median is reported)")
+    args = parser.parse_args()
+    quick = args.quick
+    sizes = tuple(args.sizes) if args.sizes else (50, 100) if quick else (325, 650)
     kernel = kernel_us_per_step()
+    phase_rows = phases()
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         warm_up(folder)
-        runs = [end_to_end(n, folder) for n in sizes]
+        runs = [end_to_end(n, folder, runs=args.runs) for n in sizes]
         # the default's limits under the paper model (the default profile before it moved to
         # the path model): what planning the path model costs
         paper = folder / "default-paper.yaml"
         paper.write_text(yaml.safe_dump(default_paper_profile()))
-        runs.append(end_to_end(sizes[-1], folder, paper))
+        runs.append(end_to_end(sizes[-1], folder, paper, args.runs))
         reading = pass_through(PASS_THROUGH_MB // 10 if quick else PASS_THROUGH_MB, folder)
         cold = cold_start(folder)
     print("| benchmark | result |")
@@ -170,11 +216,17 @@ def main() -> None:
     for r in runs:
         print(f"| convert {r['curves']} curves{r['model']}, {r['points']:,} points "
               f"({r['output_mb']:.0f} MB out) | {r['points_per_s'] / 1e6:.2f} M points/s "
-              f"({r['slowest'] / 1e6:.2f}-{r['fastest'] / 1e6:.2f} over {END_TO_END_RUNS} runs), "
+              f"({r['slowest'] / 1e6:.2f}-{r['fastest'] / 1e6:.2f} over {r['runs']} runs), "
               f"{r['wall_s']:.2f} s, peak RSS {r['rss_mb']:.0f} MB |")
     print(f"| convert {reading['input_mb']:.0f} MB of pass-through lines and 3 curves | "
           f"{reading['wall_s']:.1f} s, peak RSS {reading['rss_mb']:.0f} MB |")
     print(f"| cold start, convert fanuc-quadratic.nc (warm cache) | {cold:.2f} s |")
+    print()
+    print("| curve, default profile | points | plan ms | step ms | write ms | plan us/point |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: |")
+    for name, points, plan_s, step_s, write_s in phase_rows:
+        print(f"| {name} | {points:,} | {plan_s * 1e3:.1f} | {step_s * 1e3:.1f} | "
+              f"{write_s * 1e3:.1f} | {plan_s / points * 1e6:.2f} |")
 
 
 if __name__ == "__main__":
