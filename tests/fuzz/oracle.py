@@ -32,9 +32,12 @@ from nurbsfeed.cli import main
 
 TIME_LIMIT_S = 10.0
 CHECK_TIME_LIMIT_S = 60.0  # `check` of a slow inch curve (70,000 moves) takes seconds
-CURVE_COMMENT = b"(nurbsfeed: curve "
-PROFILE_RECORD = b"(nurbsfeed profile: "  # gcode.profile_record
-ZERO_LENGTH = b"(nurbsfeed: zero-length curve, no move written)"
+# nurbsfeed's comment lines, in parentheses or, in a Sinumerik program, after ';'
+CURVE_COMMENT = (b"(nurbsfeed: curve ", b"; nurbsfeed: curve ")
+# gcode.profile_record: "(nurbsfeed profile: ...)", "; nurbsfeed profile: ..." in a Sinumerik program
+PROFILE_RECORD = (b"(nurbsfeed profile: ", b"; nurbsfeed profile: ")
+ZERO_LENGTH = (b"(nurbsfeed: zero-length curve, no move written)",
+               b"; nurbsfeed: zero-length curve, no move written")
 _MOVE_WORD = rb"[XYZF]-?[0-9]*\.?[0-9]*"
 _GENERATED = re.compile(rb"(?:G1 )?" + _MOVE_WORD + rb"(?: " + _MOVE_WORD + rb")*|G90|G91")
 _NUMBER = re.compile(rb"[XYZF](-?[0-9]*\.?[0-9]*)")
@@ -127,7 +130,7 @@ def _block_line(line: bytes) -> bool:
 
 
 def _generated(line: bytes) -> bool:
-    return bool(_GENERATED.fullmatch(_bare(line))) or _bare(line) == ZERO_LENGTH
+    return bool(_GENERATED.fullmatch(_bare(line))) or _bare(line) in ZERO_LENGTH
 
 
 def _match(literal: list[bytes], source: list[bytes], at: int) -> int | None:
