@@ -34,7 +34,7 @@ TIME_LIMIT_S = 10.0
 CHECK_TIME_LIMIT_S = 60.0  # `check` of a slow inch curve (70,000 moves) takes seconds
 # nurbsfeed's comment lines, in parentheses or, in a Sinumerik program, after ';'
 CURVE_COMMENT = (b"(nurbsfeed: curve ", b"; nurbsfeed: curve ")
-# gcode.profile_record: "(nurbsfeed profile: ...)", "; nurbsfeed profile: ..." in a Sinumerik program
+# the profile record (gcode.profile_record), in either form
 PROFILE_RECORD = (b"(nurbsfeed profile: ", b"; nurbsfeed profile: ")
 ZERO_LENGTH = (b"(nurbsfeed: zero-length curve, no move written)",
                b"; nurbsfeed: zero-length curve, no move written")
