@@ -72,8 +72,10 @@ CONVERGED_REL = 1e-4  # a pass lowering no b by more than this share of it: conv
 LIFT_STEPS = 30  # Newton steps of `_lift_pass`, bracketed
 FIX_ROUNDS = 4  # rounds that lower the limits where the law exceeds them
 FIX_REL = 0.01  # ... while it does so by more than this
+FIX_WORST = 1.5  # ... and while their profile lasts less than this times the best plan's
 REFINE_ROUNDS = 2  # times cells lasting longer than the optimal planner's limit are split
 TINY = 1e-12
+LAW_CHUNK = 1 << 14  # samples `sampled_law` finds the arc length of at once
 
 
 def _geometry(curve: NurbsCurve, u: np.ndarray) -> np.ndarray:
@@ -761,8 +763,8 @@ def envelope_schedule(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np
         scale = scale / near
         # the last profile, lowered where the law broke a limit: one round, no growth
         b, d = _profile(curve, grid, lim, nodes, feed_at_u, scale, b, (1.0,))
-        if not cycle_s(nodes, b, d) < worst_s:
-            break
+        if not cycle_s(nodes, b, d) < min(worst_s, FIX_WORST * best[0]):
+            break  # (a round that lowered the limits this far cannot win)
         law = sampled_law(nodes, b, d, lim.period_s)
         excess, per_cell = _cell_ratios(curve, grid, nodes, law, lim)
         if law.duration_s * excess < best[0]:
@@ -815,7 +817,11 @@ def sampled_law(nodes: _Nodes, b: np.ndarray, d: np.ndarray, period_s: float,
         periods = max(2, math.ceil(duration * slowdown / period_s * (1.0 - 1e-12)))
         t = np.arange(periods * SAMPLES_PER_PERIOD + 1) * step
         stretch = duration / t[-1]  # schedule time per law time (<= 1)
-        s = _arc_at(nodes, b, d, t_node, cell_t, t_node[first] + t * stretch)
+        # in chunks: _arc_at holds a few dozen numbers a sample (a 140 s stretch took 233 MB
+        # at once)
+        s = np.concatenate([_arc_at(nodes, b, d, t_node, cell_t,
+                                    t_node[first] + t[k:k + LAW_CHUNK] * stretch)
+                            for k in range(0, t.size, LAW_CHUNK)])
         s[0], s[-1] = nodes.s_mm[first], nodes.s_mm[last]
         s = np.maximum.accumulate(s)
         value, slope = _b_at(nodes, b, d, s)
