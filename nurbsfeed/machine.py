@@ -73,7 +73,8 @@ FLOAT_KEYS = (REQUIRED_KEYS + ("max_curve_time_s", "min_block_time_s", "rest_mov
               + tuple(AXIS_KEYS))
 INT_KEYS = ("decimals", "feed_decimals", "move_periods")
 JERK_MODELS = ("paper", "path")  # profile key jerk_model (planning.path_model)
-# profile key planner: the paper's key points and S-curves, or planning.optimal (path model)
+# profile key planner: the paper's key points and S-curves, or planning.optimal or
+# planning.envelope (path model)
 PLANNERS = ("scurve", "optimal", "envelope")
 OPTIMAL_NEEDS_SCIPY = ("planner: optimal needs scipy (its linear programs): "
                        "pip install 'nurbsfeed[optimal]'")

@@ -105,8 +105,9 @@ class Plan:
     # model, a share of the lowest limit they add to under the path model
     scurve_acc_mm_s2: float
     scurve_jerk_mm_s3: float
-    # "scurve": the paper's key points and S-curves; "optimal": planning.optimal's schedule,
-    # whose keys are the rests alone (the fields above describe the S-curve plan it started from)
+    # "scurve": the paper's key points and S-curves; "envelope" / "optimal": planning.envelope's
+    # or planning.optimal's schedule, whose keys are the rests alone (the fields above describe
+    # the S-curve plan it started from)
     planner: str = "scurve"
 
     @cached_property
