@@ -55,9 +55,9 @@ from nurbsfeed.planning.optimal import (
     _hermite_basis,
     _jumps,
     _Nodes,
-    _nodes,
     _refined,
     cycle_s,
+    schedule_nodes,
 )
 from nurbsfeed.planning.path_model import frames, jump_speeds, static_limit
 from nurbsfeed.planning.timelaw import TimeLaw
@@ -727,15 +727,10 @@ def envelope_schedule(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np
     it would replace). slowdown: a uniform slowdown on top of the one the law needs."""
     if grid.length_mm <= 0.0:
         return None
-    floor = 1e-9 * float(grid.s_mm[-1])
-    rest_nodes = rest_nodes[np.concatenate([[True], np.diff(grid.s_mm[rest_nodes]) >= floor])]
-    rest_nodes[-1] = grid.u.size - 1
-    rest = np.zeros(grid.u.size, dtype=bool)
-    rest[rest_nodes] = True
-    nodes = _nodes(curve, grid, lim, np.asarray(grid.s_mm, dtype=float), np.asarray(grid.u),
-                   rest)
-    if int(nodes.rest.sum()) != rest_nodes.size:
+    made = schedule_nodes(curve, grid, lim, rest_nodes)
+    if made is None:
         return None
+    rest_nodes, nodes = made
     # cells cut where the S-curve plan spends more than a few periods in one: the schedule is
     # faster, so they last no longer under it (one profile, not one a refinement)
     b_start = np.interp(nodes.s_mm, grid.s_mm, v_start) ** 2

@@ -557,6 +557,23 @@ class Schedule:
     rest_nodes: np.ndarray  # (K,) the grid nodes it rests at, one per key time of the law
 
 
+def schedule_nodes(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.ndarray
+                   ) -> tuple[np.ndarray, _Nodes] | None:
+    """The rests (the grid nodes rest_nodes (R,), those closer than the nodes' merging distance
+    taken as one: a stretch of no length) and a schedule's nodes on the grid (`_nodes`); None
+    where a rest merged into another (which the merging here prevents)."""
+    floor = MIN_CELL_REL * float(grid.s_mm[-1])
+    rest_nodes = rest_nodes[np.concatenate([[True], np.diff(grid.s_mm[rest_nodes]) >= floor])]
+    rest_nodes[-1] = grid.u.size - 1
+    rest = np.zeros(grid.u.size, dtype=bool)
+    rest[rest_nodes] = True
+    nodes = _nodes(curve, grid, lim, np.asarray(grid.s_mm, dtype=float), np.asarray(grid.u),
+                   rest)
+    if int(nodes.rest.sum()) != rest_nodes.size:
+        return None
+    return rest_nodes, nodes
+
+
 def optimal_schedule(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.ndarray,
                      v_start: np.ndarray, feed_at_u: Callable[[np.ndarray], np.ndarray]
                      ) -> Schedule | None:
@@ -566,16 +583,10 @@ def optimal_schedule(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.
     where the optimiser cannot help (module docstring)."""
     if grid.u.size > MAX_NODES or grid.length_mm <= 0.0:
         return None
-    # rests closer than the nodes' merging distance (a stretch of no length) are one rest
-    floor = MIN_CELL_REL * float(grid.s_mm[-1])
-    rest_nodes = rest_nodes[np.concatenate([[True], np.diff(grid.s_mm[rest_nodes]) >= floor])]
-    rest_nodes[-1] = grid.u.size - 1
-    rest = np.zeros(grid.u.size, dtype=bool)
-    rest[rest_nodes] = True
-    nodes = _nodes(curve, grid, lim, np.asarray(grid.s_mm, dtype=float), np.asarray(grid.u),
-                   rest)
-    if int(nodes.rest.sum()) != rest_nodes.size:
-        return None  # (a rest merged into another: cannot happen after the merging above)
+    made = schedule_nodes(curve, grid, lim, rest_nodes)
+    if made is None:
+        return None
+    rest_nodes, nodes = made
     b = np.interp(nodes.s_mm, grid.s_mm, v_start) ** 2
     b[nodes.rest] = 0.0
     scale = np.ones(nodes.h_mm.size)
