@@ -47,6 +47,7 @@ from nurbsfeed.jit import jit
 from nurbsfeed.planning.grid import Grid
 from nurbsfeed.planning.limits import Limits, speed_limit
 from nurbsfeed.planning.optimal import (
+    MAX_NODES,
     SAMPLES_PER_PERIOD,
     Schedule,
     _arc_at,
@@ -76,6 +77,9 @@ FIX_WORST = 1.5  # ... and while their profile lasts less than this times the be
 REFINE_ROUNDS = 2  # times cells lasting longer than the optimal planner's limit are split
 TINY = 1e-12
 LAW_CHUNK = 1 << 14  # samples `sampled_law` finds the arc length of at once
+# the law has a piece a sample: past this many periods a curve keeps the S-curve plan, whose
+# pieces do not grow with its duration (a two-hour curve's law would take 1.2 GB)
+MAX_LAW_PERIODS = 1_000_000
 
 
 def _geometry(curve: NurbsCurve, u: np.ndarray) -> np.ndarray:
@@ -723,9 +727,11 @@ def envelope_schedule(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np
     ends, corners and cusps. v_start (M,): a speed at the grid's nodes that keeps the limits
     (the S-curve plan's), which sets where cells are cut finer. feed_at_u: parameters (N,) ->
     programmed feed (N,). None where it cannot plan (a profile of b = 0 inside a stretch: a
-    motion that never arrives) or where its schedule would last longer than worst_s (the plan
-    it would replace). slowdown: a uniform slowdown on top of the one the law needs."""
-    if grid.length_mm <= 0.0:
+    motion that never arrives), where its schedule would last longer than worst_s (the plan
+    it would replace) or MAX_LAW_PERIODS, or on a grid of more than MAX_NODES nodes (each
+    takes about 2.5 kB of rows: a two-hour curve's 200,000 took 750 MB). slowdown: a uniform
+    slowdown on top of the one the law needs."""
+    if grid.length_mm <= 0.0 or grid.u.size > MAX_NODES:
         return None
     made = schedule_nodes(curve, grid, lim, rest_nodes)
     if made is None:
@@ -742,7 +748,7 @@ def envelope_schedule(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np
         nodes, b_start = refined
     scale = np.ones(nodes.s_mm.size)
     b, d = _profile(curve, grid, lim, nodes, feed_at_u, scale, None)
-    if not cycle_s(nodes, b, d) < worst_s:
+    if not cycle_s(nodes, b, d) < min(worst_s, MAX_LAW_PERIODS * lim.period_s):
         return None
     law = sampled_law(nodes, b, d, lim.period_s)
     excess, per_cell = _cell_ratios(curve, grid, nodes, law, lim)
