@@ -20,7 +20,7 @@ from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.interpolate import interpolate
 from nurbsfeed.machine import load_machine
 from nurbsfeed.pipeline import convert_file, plan_block, verified_plan
-from nurbsfeed.planning import envelope
+from nurbsfeed.planning import envelope_passes, envelope_rows
 from nurbsfeed.planning.planner import plan_curve
 from nurbsfeed.safety import slowdown_from_points
 from tests.bench.dense_curves import dense_curves
@@ -50,7 +50,7 @@ def test_the_convex_pass_gives_the_greatest_profile_curving_no_less_than_its_bou
     c[30] = 1.0  # a low cap
     lo = np.full(xi.size, -20.0)
     before = c.copy()
-    envelope._convex_pass(xi, c, width, lo, 0, xi.size - 1, np.empty(xi.size),
+    envelope_passes._convex_pass(xi, c, width, lo, 0, xi.size - 1, np.empty(xi.size),
                           np.empty(xi.size, dtype=np.int64))
     g = xi[1] - xi[0]
     curve2 = ((c[2:] - c[1:-1]) / g - (c[1:-1] - c[:-2]) / g) / width[1:-1]
@@ -70,14 +70,14 @@ def test_the_slope_passes_give_the_classic_forward_and_backward_profile() -> Non
     start, 2 A (L - s) to the end): the acceleration-limited optimum, to rounding."""
     xi = np.linspace(0.0, 20.0, 81)
     w = np.full(xi.size, 0.5)
-    rows = np.zeros((xi.size, envelope.ROWS, 4))
+    rows = np.zeros((xi.size, envelope_rows.ROWS, 4))
     rows[:, :, 2] = np.inf
     acc = 1000.0
     rows[:, 0] = (1.0, 0.0, 2.0 * acc, 0.0)
     rows[:, 1] = (-1.0, 0.0, 2.0 * acc, 0.0)
     c = np.full(xi.size, 40000.0)
     c[0] = c[-1] = 0.0
-    envelope._slope_passes(xi, c, w, rows, 0, xi.size - 1)
+    envelope_passes._slope_passes(xi, c, w, rows, 0, xi.size - 1)
     expected = np.minimum(40000.0, 2 * acc * np.minimum(xi, xi[-1] - xi))
     assert np.allclose(c, expected, rtol=1e-12, atol=1e-9)
 
@@ -86,10 +86,10 @@ def test_the_row_pass_lowers_both_sides_of_a_minimum_that_curves_up_too_fast() -
     """A valley row (both outer weights positive) broken at a minimum takes both sides down,
     never below the minimum, and leaves the row held."""
     c = np.array([10.0, 10.0, 1.0, 10.0, 10.0])
-    rows = np.zeros((c.size, envelope.ROWS3, 7))
+    rows = np.zeros((c.size, envelope_rows.ROWS3, 7))
     rows[:, :, 3] = np.inf
     rows[2, 0] = (1.0, -2.0, 1.0, 4.0, 0.0, 1.0, 0.0)  # c1 - 2 c2 + c3 <= 4 / sqrt(c2)
-    envelope._row_pass(c, rows, 0, c.size - 1)
+    envelope_passes._row_pass(c, rows, 0, c.size - 1)
     assert c[1] == pytest.approx(c[3]) and c[1] >= c[2] == 1.0
     assert c[1] - 2 * c[2] + c[3] <= 4.0 / np.sqrt(c[2]) + 1e-12
 
