@@ -100,27 +100,34 @@ def plan_block(block: CurveBlock, machine: Machine, method: str = "rk2c") -> Pla
 def verified_plan(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s: np.ndarray,
                   max_curve_time_s: float = math.inf, method: str = "rk2c",
                   feed_cap: float = math.inf) -> Plan:
-    """`planner.plan_curve`, and for the envelope planner (design §2e) a look at its points:
+    """`planner.plan_curve`, and under the path model a look at the plan's points (design §2e):
     stepped by `method`, they are read as positions one period apart
     (`safety.slowdown_from_points`, feed_cap the highest feed on the curve); where an axis's
     velocity, acceleration or jerk, or the jerk vector, is above its limit by more than
-    POSITION_REL, the law is slowed uniformly by what they ask (POSITION_ROUNDS times at most),
-    and if that is not enough the S-curve planner plans the curve instead: the one bounded
-    fallback, so that the motion guard and check never meet a plan above its limits."""
+    POSITION_REL, the law is slowed uniformly by what they ask (POSITION_ROUNDS times at most).
+    An envelope plan still above then gives way to the S-curve plan, read the same way: the
+    one bounded fallback. A plan still above after all that goes on to the motion guard, which
+    refuses it (exit 2, located, nothing written)."""
+    planners = [lim.planner] + (["scurve"] if lim.planner == "envelope" else [])
     plan = plan_curve(curve, lim, feed_u, feed_mm_s, max_curve_time_s)
-    if plan.planner != "envelope":
+    if lim.jerk_model != "path":  # the paper model's jerk limits are the law's and a proxy
         return plan
     caps = dataclasses.replace(plan.limits, feed_mm_s=min(feed_cap, plan.limits.feed_mm_s))
-    slowdown = 1.0
-    for _ in range(POSITION_ROUNDS):
-        asks = slowdown_from_points(caps, (chunk.points
-                                           for chunk in Stepping(plan, method).chunks()))
-        if asks <= 1.0 + POSITION_REL:
-            return plan
-        slowdown *= asks * (1.0 + POSITION_REL)
-        plan = plan_curve(curve, lim, feed_u, feed_mm_s, max_curve_time_s, slowdown)
-    return plan_curve(curve, dataclasses.replace(lim, planner="scurve"), feed_u, feed_mm_s,
-                      max_curve_time_s)
+    for planner in planners:
+        planned = dataclasses.replace(lim, planner=planner)
+        if planner != lim.planner:
+            plan = plan_curve(curve, planned, feed_u, feed_mm_s, max_curve_time_s)
+        slowdown = 1.0
+        for round_ in range(POSITION_ROUNDS + 1):
+            asks = slowdown_from_points(caps, (chunk.points
+                                               for chunk in Stepping(plan, method).chunks()))
+            if asks <= 1.0 + POSITION_REL:
+                return plan
+            if round_ == POSITION_ROUNDS:
+                break
+            slowdown *= asks * (1.0 + POSITION_REL)
+            plan = plan_curve(curve, planned, feed_u, feed_mm_s, max_curve_time_s, slowdown)
+    return plan
 
 
 def rest_move_periods(machine: Machine) -> int:

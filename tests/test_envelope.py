@@ -184,14 +184,16 @@ def test_the_slowdown_from_points_reads_each_difference_against_its_limit() -> N
 
 
 @pytest.mark.parametrize("name", ["axis-jerk-from-positions-a.ngc",
-                                  "axis-jerk-from-positions-b.ngc"])
+                                  "axis-jerk-from-positions-b.ngc",
+                                  "scurve-fallback-slowed.ngc"])
 def test_a_plan_above_a_limit_from_its_points_is_slowed_before_anything_is_written(
         tmp_path: Path, name: str) -> None:
     """Fuzz seed 50 (cases 11 and 268): the envelope's law kept every limit sampled twice a
     period, but its points, read one period apart, jerked 5.5 % and 17.7 % above an axis's
-    limit, and the motion guard refused the valid program (exit 2, nothing written). Now the
-    points are read before writing and the law slowed by what they ask: the program converts,
-    and check passes it."""
+    limit, and the motion guard refused the valid program (exit 2, nothing written). Fuzz seed
+    52 (case 385): the S-curve plan the envelope gives way to jerked 15 % above Y's limit. Now
+    the points are read before writing and the law slowed by what they ask, the S-curve plan's
+    too: each program converts, and check passes it."""
     out = tmp_path / "out.nc"
     convert_file(DATA / name, out, DEFAULT)
     report = check_files(DATA / name, out, DEFAULT)

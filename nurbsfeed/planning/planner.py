@@ -672,8 +672,8 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
                feed_mm_s: np.ndarray = np.empty(0), max_curve_time_s: float = math.inf,
                extra_slowdown: float = 1.0) -> Plan:
     """Plan the feed along one curve under `lim` (feed cap already in lim.feed_mm_s).
-    extra_slowdown: a uniform slowdown the envelope planner's law takes on top of its own (the
-    pipeline's check from the points asks for it, `pipeline.verified_plan`).
+    extra_slowdown: a uniform slowdown the law takes on top of its own (the pipeline's check
+    from the points asks for it, `pipeline.verified_plan`).
 
     CurveError (without a place) when the planned cycle exceeds max_curve_time_s or is not a
     finite number of periods: checked on the law's duration before it is rounded to whole
@@ -742,7 +742,7 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
         _, on, law, excess, hidden_slowdown = best
     if not law.duration_s <= max_curve_time_s:
         raise CurveError(_too_long(law.duration_s, max_curve_time_s))
-    slowdown = max(excess, hidden_slowdown)
+    slowdown = max(excess, hidden_slowdown) * extra_slowdown
     slowdown, piece_key, piece_periods, piece_scale = _whole_periods(
         on.v, law.key_t_s, on.key_node, on.limit, on.v_nodes, lim.period_s, slowdown)
     if np.any(piece_periods < 0):
