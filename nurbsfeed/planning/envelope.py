@@ -66,7 +66,6 @@ from nurbsfeed.planning.envelope_rows import (
 from nurbsfeed.planning.grid import Grid
 from nurbsfeed.planning.limits import Limits
 from nurbsfeed.planning.optimal import (
-    MAX_NODES,
     Schedule,
     _cell_ratios,
     _jumps,
@@ -112,20 +111,23 @@ def _profile(curve: NurbsCurve, grid: Grid, lim: Limits, nodes: _Nodes,
     spline = _Spline(nodes)
     s = nodes.s_mm
     m = s.size
-    geo = _geometry(curve, nodes.u)
+    node_frames = frames(curve, nodes.u)
+    geo = _geometry(node_frames)
     # a cell's end read from inside it: at a knot kappa' (through C''') jumps, and the span
     # before the knot is the cell's
     before = np.maximum(np.nextafter(nodes.u, -np.inf), np.concatenate([[nodes.u[0]],
                                                                         nodes.u[:-1]]))
-    geo_end = _geometry(curve, before)
+    geo_end = _geometry(frames(curve, before))
     mid_u = arc_parameters(curve, grid, 0.5 * (s[:-1] + s[1:]))
-    geo_mid = _geometry(curve, mid_u)
+    mid_frames = frames(curve, mid_u)
+    geo_mid = _geometry(mid_frames)
     mid_scale = np.minimum(scale[:-1], scale[1:])
-    node_cap = (_caps(curve, lim, nodes.u, feed_at_u(nodes.u)) * scale) ** 2
-    mid_cap = (_caps(curve, lim, mid_u, feed_at_u(mid_u)) * mid_scale) ** 2
+    node_jumps = _jumps(curve, nodes.u)
+    node_cap = (_caps(lim, node_frames, node_jumps, feed_at_u(nodes.u)) * scale) ** 2
+    mid_cap = (_caps(lim, mid_frames, _jumps(curve, mid_u), feed_at_u(mid_u)) * mid_scale) ** 2
     rest_cap = _rest_caps(lim, nodes, geo, scale)
     cap = _coefficient_caps(spline, node_cap, mid_cap, rest_cap)
-    jump = np.abs(_jumps(curve, nodes.u))
+    jump = np.abs(node_jumps)
     knot_geo = np.ascontiguousarray(geo[spline.knot])
     knot_scale = np.ascontiguousarray(scale[spline.knot])
     axis_acc = np.array(lim.axis_acc_mm_s2, dtype=float)
@@ -135,9 +137,8 @@ def _profile(curve: NurbsCurve, grid: Grid, lim: Limits, nodes: _Nodes,
     hull = np.empty(n, dtype=np.int64)
     if start is None:
         static = _coefficient_caps(
-            spline, np.minimum(node_cap, (static_limit(frames(curve, nodes.u), lim) * scale)
-                               ** 2),
-            np.minimum(mid_cap, (static_limit(frames(curve, mid_u), lim) * mid_scale) ** 2),
+            spline, np.minimum(node_cap, (static_limit(node_frames, lim) * scale) ** 2),
+            np.minimum(mid_cap, (static_limit(mid_frames, lim) * mid_scale) ** 2),
             rest_cap)
         ceiling = static
     else:
@@ -199,8 +200,6 @@ def envelope_schedule(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np
     it would replace) or MAX_LAW_PERIODS, or on a grid of more than MAX_NODES nodes (each
     takes about 2.5 kB of rows: a two-hour curve's 200,000 took 750 MB). slowdown: a uniform
     slowdown on top of the one the law needs."""
-    if grid.length_mm <= 0.0 or grid.u.size > MAX_NODES:
-        return None
     made = schedule_nodes(curve, grid, lim, rest_nodes)
     if made is None:
         return None

@@ -8,18 +8,17 @@ import math
 
 import numpy as np
 
-from nurbsfeed.geometry.nurbs import NurbsCurve
 from nurbsfeed.jit import jit
 from nurbsfeed.planning.limits import Limits, speed_limit
-from nurbsfeed.planning.optimal import _jumps, _Nodes
-from nurbsfeed.planning.path_model import frames, jump_speeds
+from nurbsfeed.planning.optimal import _Nodes
+from nurbsfeed.planning.path_model import Frames, jump_speeds
 
 TINY = 1e-12
 
 
-def _geometry(curve: NurbsCurve, u: np.ndarray) -> np.ndarray:
-    """Per point (N,): kappa, dkappa/ds, T (3), K = kappa N (3), K_s (3), tau, as (N, 12)."""
-    f = frames(curve, u)
+def _geometry(f: Frames) -> np.ndarray:
+    """Per point (N,) of the frames f: kappa, dkappa/ds, T (3), K = kappa N (3), K_s (3), tau,
+    as (N, 12)."""
     k = f.kappa[:, None]
     k_s = (-(f.kappa**2)[:, None] * f.tangent + f.dkappa_ds[:, None] * f.normal
            + (f.kappa * f.torsion)[:, None] * f.binormal)
@@ -27,12 +26,12 @@ def _geometry(curve: NurbsCurve, u: np.ndarray) -> np.ndarray:
                                                  k_s, f.torsion]))
 
 
-def _caps(curve: NurbsCurve, lim: Limits, u: np.ndarray, feed_mm_s: np.ndarray) -> np.ndarray:
-    """The speed limit (N,) where b' and b'' play no part: `limits.speed_limit`, the axis
-    velocities, the binormal jerk sqrt(b) kappa tau b <= J_n, jumps of kappa N at knots, and
-    where the path is straight (kappa = 0) the normal jerk kappa' v^3 <= J_n."""
-    f = frames(curve, u)
-    cap = np.minimum(speed_limit(f.kappa, lim, feed_mm_s), jump_speeds(_jumps(curve, u), lim))
+def _caps(lim: Limits, f: Frames, jumps: np.ndarray, feed_mm_s: np.ndarray) -> np.ndarray:
+    """The speed limit (N,) where b' and b'' play no part, at points with frames f, jumps
+    (N, 3) of kappa N (`optimal._jumps`) and programmed feed (N,): `limits.speed_limit`, the
+    axis velocities, the binormal jerk sqrt(b) kappa tau b <= J_n, the jumps read over a period,
+    and where the path is straight (kappa = 0) the normal jerk kappa' v^3 <= J_n."""
+    cap = np.minimum(speed_limit(f.kappa, lim, feed_mm_s), jump_speeds(jumps, lim))
     with np.errstate(divide="ignore"):
         for x in range(3):
             tx = np.abs(f.tangent[:, x])

@@ -561,7 +561,10 @@ def schedule_nodes(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.nd
                    ) -> tuple[np.ndarray, _Nodes] | None:
     """The rests (the grid nodes rest_nodes (R,), those closer than the nodes' merging distance
     taken as one: a stretch of no length) and a schedule's nodes on the grid (`_nodes`); None
-    where a rest merged into another (which the merging here prevents)."""
+    on a curve of no length, a grid above MAX_NODES, or where a rest merged into another
+    (which the merging here prevents)."""
+    if grid.u.size > MAX_NODES or grid.length_mm <= 0.0:
+        return None
     floor = MIN_CELL_REL * float(grid.s_mm[-1])
     rest_nodes = rest_nodes[np.concatenate([[True], np.diff(grid.s_mm[rest_nodes]) >= floor])]
     rest_nodes[-1] = grid.u.size - 1
@@ -581,8 +584,6 @@ def optimal_schedule(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.
     grid's nodes (the base plan's, slowed as it runs), resting at grid nodes rest_nodes (R,):
     the ends, corners and cusps. feed_at_u: parameters (N,) -> programmed feed (N,). None
     where the optimiser cannot help (module docstring)."""
-    if grid.u.size > MAX_NODES or grid.length_mm <= 0.0:
-        return None
     made = schedule_nodes(curve, grid, lim, rest_nodes)
     if made is None:
         return None
