@@ -121,7 +121,10 @@ def _check_stopped() -> None:
 
 
 def _unraisable(hook_args: Any) -> None:
-    if not isinstance(hook_args.exc_value, Interrupted):
+    """Keep a stop to its one line on stderr. A finaliser the signal cut short (llvmlite's
+    ObjectRef.__del__, half detached) fails again when it is collected at exit; once a stop
+    signal has arrived the run only cleans up and ends, so no such report is news."""
+    if not isinstance(hook_args.exc_value, Interrupted) and not _stopped_by:
         sys.__unraisablehook__(hook_args)
 
 
@@ -365,6 +368,7 @@ def _compile_notice_shared() -> Any:
 # ---- --jobs: worker processes ----
 
 _worker_busy = False  # in a --jobs worker: a file is being converted
+WORKER_STOP_S = 10.0  # how long a stopped worker has to remove its temporary files
 
 
 def _worker_stop(signum: int, frame: Any) -> None:
@@ -453,6 +457,14 @@ def _pool_round(todo: list[int], jobs: int, sources: list[Path], targets: list[P
             for child in multiprocessing.active_children():
                 if child.pid is not None:  # (started: active children always are)
                     os.kill(child.pid, exc.signum)  # each removes its temporary files and ends
+            for child in multiprocessing.active_children():
+                child.join(WORKER_STOP_S)
+                if child.is_alive():  # stuck in compiled code past the grace period
+                    child.kill()
+            # The pool's manager thread closes its wake-up pipe as it notices the workers gone;
+            # concurrent.futures' exit hook writes to that pipe unlocked (Python < 3.12), so
+            # the thread is joined here rather than raced at interpreter exit.
+            pool.shutdown(wait=True)
             raise
     return lost, waiting[::-1]
 

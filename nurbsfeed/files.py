@@ -19,8 +19,8 @@ import contextlib
 import io
 import os
 import re
+import secrets
 import shutil
-import signal
 import stat
 import tempfile
 from collections.abc import Iterator
@@ -127,7 +127,8 @@ _CREATE_MODE = _umask_mode()
 # Names of an open descriptor (Linux, BSD): whatever file is behind them belongs to the shell's
 # redirection, so it is written into, never replaced (`-o /dev/stdout >> log` must append).
 _DESCRIPTOR_PATH = re.compile(r"/dev/(stdout|stderr|fd/\d+)|/proc/(self|thread-self|\d+)/fd/\d+")
-_STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
+# O_EXCL: a name taken since `_temporary_name` looked fails rather than being shared.
+_TEMPORARY_FLAGS = os.O_RDWR | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0)
 _LIVE: set[str] = set()  # the temporary outputs this process holds (atomic_output)
 _KIND_NAMES = {stat.S_IFDIR: "a directory", stat.S_IFBLK: "a block device",
                stat.S_IFSOCK: "a socket"}
@@ -176,18 +177,13 @@ def atomic_output(path: Path | None) -> Iterator[BinaryIO]:
     final, through = output_target(path) if path is not None else (None, False)
     folder = final.parent if final is not None and not through else None
     prefix = f".{final.name}." if final is not None and folder else "nurbsfeed."
-    # A stop signal (cli turns it into an exception) between creating the file and holding its
-    # name would leave it behind: held until the cleanup below knows the name.
-    handle = None
-    held = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
+    # A stop signal (cli turns it into an exception) can land anywhere, even inside the call
+    # that creates the file (a signal mask does not help: another thread takes the signal and
+    # the handler still runs here): the name is known and held before the file exists.
+    handle = name = None
     try:
-        try:
-            handle = tempfile.NamedTemporaryFile(  # noqa: SIM115 (closed and removed below)
-                "w+b", dir=folder, prefix=prefix,
-                suffix=".part", delete=False)
-            _LIVE.add(handle.name)
-        finally:
-            signal.pthread_sigmask(signal.SIG_SETMASK, held)
+        name = _temporary_name(folder, prefix)
+        handle = os.fdopen(os.open(name, _TEMPORARY_FLAGS, 0o600), "w+b")
         with handle:
             yield cast(BinaryIO, handle)
             handle.flush()
@@ -201,24 +197,37 @@ def atomic_output(path: Path | None) -> Iterator[BinaryIO]:
             if os.path.lexists(final) and not stat.S_ISREG(os.lstat(final).st_mode):
                 raise InputError("cannot write output: it is no longer a regular file",
                                  Location(str(path)))  # swapped since output_target looked
-            os.chmod(handle.name, _CREATE_MODE)  # a temp file is 0600; a new file is not
-            os.replace(handle.name, final)
+            os.chmod(name, _CREATE_MODE)  # a temp file is 0600; a new file is not
+            os.replace(name, final)
         else:
-            os.unlink(handle.name)
-        _LIVE.discard(handle.name)
+            os.unlink(name)
+        _LIVE.discard(name)
     except BaseException:
         if handle is not None:
+            handle.close()
+        if name is not None:
             with contextlib.suppress(OSError):
-                os.unlink(handle.name)
-            _LIVE.discard(handle.name)
+                os.unlink(name)
+            _LIVE.discard(name)
         raise
+
+
+def _temporary_name(folder: Path | None, prefix: str) -> str:
+    """A new name for a temporary output in `folder` (None: the system's temporary folder),
+    registered in _LIVE before anything is created under it."""
+    where = str(folder) if folder is not None else tempfile.gettempdir()
+    while True:
+        name = os.path.join(where, f"{prefix}{secrets.token_hex(4)}.part")
+        if not os.path.lexists(name) and name not in _LIVE:
+            _LIVE.add(name)
+            return name
 
 
 def remove_live_temporaries() -> None:
     """Remove every temporary output this process still holds. A stop signal that lands in
     the instant between the file's creation and the caller's `with` holding it (inside
     contextlib's __enter__) leaves the cleanup above no frame to run in: the signal's exit
-    path calls this (cli.run)."""
+    path calls this (cli.run). A name registered whose file was never created is skipped."""
     for name in list(_LIVE):
         with contextlib.suppress(OSError):
             os.unlink(name)

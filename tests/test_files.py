@@ -333,6 +333,22 @@ def test_a_signal_mid_conversion_removes_the_temporary_files(
     assert listing(tmp_path) == []
 
 
+def test_a_signal_inside_the_call_that_creates_the_temporary_file_leaves_nothing(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The handler can run between the file's creation and its name reaching Python (another
+    thread takes the signal, so no mask keeps it out): the name is held before the file exists."""
+    real_open = os.open
+
+    def open_then_stopped(name: str, flags: int, mode: int = 0o777) -> int:
+        os.close(real_open(name, flags, mode))
+        raise Interrupted(signal.SIGTERM)
+
+    monkeypatch.setattr(files.os, "open", open_then_stopped)
+    with pytest.raises(Interrupted), atomic_output(tmp_path / "out.nc"):
+        pass
+    assert listing(tmp_path) == [] and not files._LIVE
+
+
 def test_a_signal_stops_every_worker_of_a_parallel_batch(tmp_path: Path,
                                                          long_program: Path) -> None:
     """Only the parent is signalled (as by `kill PID`): it stops its workers, which remove their
