@@ -3,6 +3,7 @@ option; and what a profile file may not be (an alias bomb, too many values, too 
 
 from __future__ import annotations
 
+import configparser
 import math
 import re
 from pathlib import Path
@@ -317,11 +318,21 @@ def test_the_profiles_decimals_and_the_option_override_the_choice(tmp_path: Path
     assert max(digits) == 6
 
 
-def test_the_linuxcnc_profile_keeps_every_axis_within_the_machines_acceleration() -> None:
-    """1000 mm/s² per axis: an axis's acceleration is at most the path's, sqrt(A_t² + A_n²)."""
+def test_the_linuxcnc_profile_holds_each_axis_to_the_simulated_mills_joint_limits() -> None:
+    """Its axes' limits are the INI's (tests/linuxcnc/sim/sim.ini, [JOINT_n] MAX_VELOCITY and
+    MAX_ACCELERATION), planned under the path model, which holds each axis to its own; the
+    path's accelerations leave each axis within them even without it, sqrt(A_t² + A_n²)."""
+    ini = configparser.ConfigParser(strict=False, inline_comment_prefixes=("#",))
+    ini.read(ROOT / "tests" / "linuxcnc" / "sim" / "sim.ini")
     limits = load_machine("linuxcnc").limits
-    assert math.hypot(limits.acc_mm_s2, limits.normal_acc_mm_s2) <= 1000.0
-    assert limits.feed_mm_s <= 200.0
+    assert (limits.jerk_model, limits.planner) == ("path", "envelope")
+    for x in range(3):
+        joint = ini[f"JOINT_{x}"]
+        assert limits.axis_vel_mm_s[x] == float(joint["MAX_VELOCITY"])
+        assert limits.axis_acc_mm_s2[x] == float(joint["MAX_ACCELERATION"])
+        assert math.isinf(limits.axis_jerk_mm_s3[x])  # LinuxCNC 2.9 has no jerk limit
+    assert math.hypot(limits.acc_mm_s2, limits.normal_acc_mm_s2) <= min(limits.axis_acc_mm_s2)
+    assert limits.feed_mm_s <= min(limits.axis_vel_mm_s)
 
 
 @pytest.mark.parametrize("name, overrides", [
