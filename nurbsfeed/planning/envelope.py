@@ -83,9 +83,15 @@ GROWTH = (2.0, 1.5, 1.5, 1.3, 1.3, 1.2, 1.1, 1.05, 1.03, 1.02, 1.01, 1.0)
 INNER_ROUNDS = 60  # cap, slope and curvature passes of the last round, at most
 EARLY_ROUNDS = 10  # ... of the rounds before it, which only shape the terms to freeze
 CONVERGED_REL = 1e-4  # a pass lowering no b by more than this share of it: converged
-FIX_ROUNDS = 4  # rounds that lower the limits where the law exceeds them
+FIX_ROUNDS = 8  # rounds that lower the limits where the law exceeds them
 FIX_REL = 0.01  # ... while it does so by more than this
 FIX_WORST = 1.5  # ... and while their profile lasts less than this times the best plan's
+# a profile whose growth a share of coefficients above this took in full in the last round that
+# grew (no bound lowered them: the growth, not the limits, held them) grows again from where it
+# ended, REGROW_ROUNDS times at most: a stretch the first round's frozen terms pulled far below
+# its limits (a 3 mm star's arms between near-cusps) rises by the product of GROWTH a time
+REGROW_SHARE = 0.02
+REGROW_ROUNDS = 3
 REFINE_ROUNDS = 2  # times cells lasting longer than the optimal planner's limit are split
 # the law has a piece a sample: past this many periods a curve keeps the S-curve plan, whose
 # pieces do not grow with its duration (a two-hour curve's law would take 1.2 GB)
@@ -95,8 +101,9 @@ MAX_LAW_PERIODS = 1_000_000
 def _profile(curve: NurbsCurve, grid: Grid, lim: Limits, nodes: _Nodes,
              feed_at_u: Callable[[np.ndarray], np.ndarray], scale: np.ndarray,
              start: np.ndarray | None, growth_rounds: tuple[float, ...] = GROWTH
-             ) -> tuple[np.ndarray, np.ndarray]:
-    """The greatest spline the passes find on these nodes, as b and b' (M,) at the nodes; the
+             ) -> tuple[np.ndarray, np.ndarray, float]:
+    """The greatest spline the passes find on these nodes, as b and b' (M,) at the nodes, and
+    the share of coefficients that took the last growing round's growth in full; the
     limits scaled per node by scale (M,) (FIX_ROUNDS lower it where the law exceeded a limit):
     a speed by scale, an acceleration by scale^2, a jerk by scale^3.
 
@@ -153,8 +160,10 @@ def _profile(curve: NurbsCurve, grid: Grid, lim: Limits, nodes: _Nodes,
         frozen_d = _node_slopes(s, frozen_b)
         step = np.diff(s)
         frozen_dd = np.divide(np.diff(frozen_d), step, out=np.zeros(m - 1), where=step > 0.0)
+    held_by_growth = 0.0
     for index, growth in enumerate(growth_rounds):
         last_round = index == len(growth_rounds) - 1
+        grown = c.copy()
         # sqrt(b) where it divides a limit, and the terms in b that tighten a bound, at the
         # ceiling: b only falls below it, so those rows are conservative; the rest at the last
         # round's profile
@@ -184,9 +193,11 @@ def _profile(curve: NurbsCurve, grid: Grid, lim: Limits, nodes: _Nodes,
                 change = max(change, _rest_pass(c, ratio, first, last))
             if change <= CONVERGED_REL:
                 break
+        if index > 0 and growth_rounds[index - 1] > 1.0:  # this round started from a growth
+            held_by_growth = float(np.mean((c >= grown) & (grown < cap)))
         frozen_b, frozen_d, frozen_dd = spline.at_nodes(c)
         c = np.minimum(cap, growth * c)
-    return frozen_b, frozen_d
+    return frozen_b, frozen_d, held_by_growth
 
 
 def envelope_schedule(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.ndarray,
@@ -214,7 +225,14 @@ def envelope_schedule(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np
             break
         nodes, b_start = refined
     scale = np.ones(nodes.s_mm.size)
-    b, d = _profile(curve, grid, lim, nodes, feed_at_u, scale, None)
+    b, d, held = _profile(curve, grid, lim, nodes, feed_at_u, scale, None)
+    for _ in range(REGROW_ROUNDS):
+        if held <= REGROW_SHARE:
+            break
+        b_more, d_more, held = _profile(curve, grid, lim, nodes, feed_at_u, scale, b)
+        if not cycle_s(nodes, b_more, d_more) < cycle_s(nodes, b, d):
+            break
+        b, d = b_more, d_more
     if not cycle_s(nodes, b, d) < min(worst_s, MAX_LAW_PERIODS * lim.period_s):
         return None
     law = sampled_law(nodes, b, d, lim.period_s)
@@ -230,7 +248,7 @@ def envelope_schedule(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np
         near[1:] = np.maximum(near[1:], per_cell)
         scale = scale / near
         # the last profile, lowered where the law broke a limit: one round, no growth
-        b, d = _profile(curve, grid, lim, nodes, feed_at_u, scale, b, (1.0,))
+        b, d, _ = _profile(curve, grid, lim, nodes, feed_at_u, scale, b, (1.0,))
         if not cycle_s(nodes, b, d) < min(worst_s, FIX_WORST * best[0]):
             break  # (a round that lowered the limits this far cannot win)
         law = sampled_law(nodes, b, d, lim.period_s)
