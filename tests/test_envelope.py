@@ -23,7 +23,7 @@ from nurbsfeed.pipeline import convert_file, plan_block, verified_plan
 from nurbsfeed.planning import envelope, envelope_passes, envelope_rows
 from nurbsfeed.planning.planner import plan_curve
 from nurbsfeed.safety import slowdown_from_points
-from tests.bench.dense_curves import dense_curves
+from tests.bench.dense_curves import _long_cam_curve, dense_curves
 from tests.test_bound import scurve_rest_to_rest_s
 from tests.test_degenerate import EXAMPLES, degenerate_curves
 from tests.test_path_model import assert_keeps_every_path_limit
@@ -94,6 +94,29 @@ def test_the_row_pass_lowers_both_sides_of_a_minimum_that_curves_up_too_fast() -
     assert c[1] - 2 * c[2] + c[3] <= 4.0 / np.sqrt(c[2]) + 1e-12
 
 
+def test_the_row_pass_lowers_another_coefficient_where_the_one_ahead_cannot_keep_the_row(
+        ) -> None:
+    """c0 + 0.6 c2 <= 9 sqrt(20) / sqrt(c1): the coefficient ahead in the forward sweep (c2)
+    would have to go below 0, a stop inside the stretch; c0 keeps it at 3, and nothing is
+    driven to 0."""
+    c = np.array([10.0, 20.0, 10.0])
+    rows = np.zeros((c.size, envelope_rows.ROWS3, 7))
+    rows[:, :, 3] = np.inf
+    rows[1, 0] = (1.0, 0.0, 0.6, 9.0 * np.sqrt(20.0), 0.0, 1.0, 0.0)
+    envelope_passes._row_pass(c, rows, 0, c.size - 1)
+    assert np.all(c > 0.0)
+    assert c[0] == pytest.approx(3.0) and (c[1], c[2]) == (20.0, 10.0)
+    assert c[0] + 0.6 * c[2] <= 9.0 + 1e-9
+
+
+def test_the_row_root_is_the_greatest_value_keeping_the_row() -> None:
+    """x <= 8 / sqrt(x) holds from x = 4 down; a linear step from x = 9 at the budget there
+    (8 / 3) would stop at 2.67: the budget grows as x falls."""
+    row = np.array([1.0, 0.0, 1.0, 8.0, 1.0, 0.0, 0.0])
+    x = envelope_passes._row_root(row, 9.0, 5.0, 0.0, 0, 0.0, 9.0)
+    assert x <= 4.0 and x == pytest.approx(4.0, rel=1e-9)
+
+
 # ---- cycle time -------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("length_mm", [0.5, 5.0, 50.0, 300.0])
@@ -156,6 +179,17 @@ def test_a_profile_its_growth_held_grows_again(monkeypatch: pytest.MonkeyPatch) 
     assert_keeps_every_path_limit(interpolate(plan, "rk2c"), lim, curve.name)
     monkeypatch.setattr(envelope, "REGROW_ROUNDS", 0)
     assert plan_curve(curve, lim).cycle_time_s >= 1.2 * 0.534
+
+
+def test_a_cam_curve_whose_row_pass_drove_b_to_0_is_planned_by_the_envelope() -> None:
+    """tests/bench/dense_curves.py's 32-point CAM curve: an axis's jerk row beside the last
+    rest had asked a coefficient below 0, b = 0 inside the stretch, and the S-curve plan
+    (2.629 s) stood in; now the envelope plans it (1.855 s) and its points keep every limit."""
+    curve = _long_cam_curve(32)
+    plan = verified_plan(curve, DEFAULT.limits, np.empty(0), np.empty(0))
+    assert plan.planner == "envelope"
+    assert plan.cycle_time_s < 0.8 * plan_curve(curve, scurve_of(DEFAULT.limits)).cycle_time_s
+    assert_keeps_every_path_limit(interpolate(plan, "rk2c"), DEFAULT.limits, curve.name)
 
 
 # ---- the limits, measured from the points -----------------------------------------------------

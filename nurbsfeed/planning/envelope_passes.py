@@ -141,6 +141,30 @@ def _lift_pass(xi, c, width, lo_axes, kappa2, jerk, first, last):
     return change
 
 
+ROOT_STEPS = 40  # bisections of `_row_root`: 2^-40 of the coefficient's drop
+
+
+@jit
+def _row_root(row, left, middle, right, j, low, high):
+    """The greatest x in [low, high] keeping row (A, B, C, budget, weights of b) with
+    coefficient j (0, 1, 2: left, middle, right) set to x, low if none does: the row's left
+    side falls with x and its b does too (budget / sqrt(b) grows), so the row holds from some
+    x down, if from any."""
+    for _ in range(ROOT_STEPS):
+        if high - low <= 1e-12 * high:
+            break
+        x = 0.5 * (low + high)
+        x0 = x if j == 0 else left
+        x1 = x if j == 1 else middle
+        x2 = x if j == 2 else right
+        have = row[0] * x0 + row[1] * x1 + row[2] * x2
+        if have <= row[3] / math.sqrt(max(row[4] * x0 + row[5] * x1 + row[6] * x2, 1e-300)):
+            low = x
+        else:
+            high = x
+    return low
+
+
 @jit
 def _row_pass(c, rows, first, last):
     """Rows A c_k-1 + B c_k + C c_k+1 <= budget / sqrt(b) (`_cell_rows`) on the inner
@@ -191,6 +215,22 @@ def _row_pass(c, rows, first, last):
                 weight = rows[k, r, j]
                 var = k - 1 + j
                 most = max(c[var] - (have - gamma) / weight, 0.0)
+                if most <= 0.0:  # the step took the budget at b as it was: b falls with it
+                    most = _row_root(rows[k, r], c[k - 1], c[k], c[k + 1], j, most, c[var])
+                if most <= 0.0:
+                    # no value of this coefficient keeps the row: b = 0 inside the stretch (a
+                    # motion that never arrives, cam-32 of tests/bench/dense_curves.py) where
+                    # lowering another would do; lower the one the row asks least of, as a
+                    # share of it
+                    best = 2.0
+                    for q in range(3):
+                        if rows[k, r, q] <= 0.0 or c[k - 1 + q] <= 0.0:
+                            continue
+                        low = max(c[k - 1 + q] - (have - gamma) / rows[k, r, q], 0.0)
+                        root = _row_root(rows[k, r], c[k - 1], c[k], c[k + 1], q, low,
+                                         c[k - 1 + q])
+                        if root > 0.0 and 1.0 - root / c[k - 1 + q] < best:
+                            best, var, most = 1.0 - root / c[k - 1 + q], k - 1 + q, root
                 change = max(change, (c[var] - most) / max(c[var], 1e-300))
                 c[var] = most
     return change
