@@ -454,12 +454,20 @@ def _arc_at(nodes: _Nodes, b: np.ndarray, d: np.ndarray, t_node: np.ndarray,
     inner = ~from_rest & ~to_rest
     c, want = cell[inner], tau[inner]
     x = want / cell_t[c]
+    # a sample Newton has brought to its fixed point (a step that no longer moves it) stays
+    # there: only the others step again
+    live = np.arange(x.size)
     for _ in range(NEWTON_STEPS):
-        q = (x[:, None] / 2) * (_GL_X[None, :] + 1)
-        inside = _hermite_b(nodes, b, d, np.repeat(c, _GL_X.size), q.ravel()).reshape(q.shape)
-        have = h[c] * x / 2 * (1.0 / np.sqrt(np.maximum(inside, 1e-300)) @ _GL_W)
-        speed = np.sqrt(np.maximum(_hermite_b(nodes, b, d, c, x), 1e-300)) / h[c]
-        x = np.clip(x - (have - want) * speed, 0.0, 1.0)
+        cl, xl = c[live], x[live]
+        q = (xl[:, None] / 2) * (_GL_X[None, :] + 1)
+        inside = _hermite_b(nodes, b, d, np.repeat(cl, _GL_X.size), q.ravel()).reshape(q.shape)
+        have = h[cl] * xl / 2 * (1.0 / np.sqrt(np.maximum(inside, 1e-300)) @ _GL_W)
+        speed = np.sqrt(np.maximum(_hermite_b(nodes, b, d, cl, xl), 1e-300)) / h[cl]
+        stepped = np.clip(xl - (have - want[live]) * speed, 0.0, 1.0)
+        x[live] = stepped
+        live = live[stepped != xl]
+        if live.size == 0:
+            break
     out[inner] = s[c] + x * h[c]
     return out
 
