@@ -4,7 +4,7 @@ The grid has nodes at every knot and enough nodes inside each span that consecut
 at most `spacing_mm` apart; refined curvature maxima are nodes too. The planner checks its speed
 profile at these nodes ("limits everywhere"), so the spacing is tied to the step length v_m T.
 
-Building it, in order (`_grid_nodes`, one compiled call; then `simpson_lengths`):
+Building it, in order (`_grid_nodes`, compiled steps; then `simpson_lengths`):
 1. Samples: per span, a node count from a 16-chord length estimate, evenly spaced in u; at a
    knot, the higher of kappa's two one-sided values.
 2. Curvature maxima: local maxima of kappa on the samples that stand out from their valleys,
@@ -124,7 +124,8 @@ def _samples(knots, coef, degree, breaks, spacing_mm):
     """Step 1: nodes evenly spaced in u per span, at most spacing_mm apart (the span's length
     estimated by CHORD_PROBES chords, plus 5 %), at least MIN_NODES_PER_SPAN; the last break
     closes the list. Returns u, kappa, |C'| at the nodes (M,), C and the unit tangent there
-    (M, 3; the tangent from the span after a knot, 0 where C' = 0). At an interior
+    (M, 3; the tangent from the span after a knot, 0 where C' = 0), and the mean of |C'| over
+    the nodes (summed in order, as numba's `ndarray.mean` did). At an interior
     knot kappa is the higher of its limits from the two sides (it jumps where the curve is
     only C1), so that no node understates the curvature around it; a side where |C'| is below
     ZERO_SPEED_REL of the other's does not count (its kappa is rounding noise)."""
@@ -172,7 +173,10 @@ def _samples(knots, coef, degree, breaks, spacing_mm):
             moves = left_speed > ZERO_SPEED_REL * speed[q] if speed[q] == speed[q] else True
             if moves and (left > kappa[q] or kappa[q] != kappa[q]):
                 kappa[q] = left
-    return u_nodes, kappa, speed, pts, tan
+    total_speed = 0.0
+    for q in range(speed.size):
+        total_speed += speed[q]
+    return u_nodes, kappa, speed, pts, tan, total_speed / speed.size
 
 
 @jit
@@ -571,8 +575,7 @@ def _near_cusp_turn(knots, coef, degree, u0):
     return (ix * ox + iy * oy + iz * oz) / norm
 
 
-@jit
-def _stops(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed, floor_mm,
+def _stops(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed, mean_speed, floor_mm,
            kappa_floor):
     """Step 3: the interior points where C' vanishes and the motion must come to rest.
 
@@ -589,11 +592,29 @@ def _stops(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed, floo
     minimum above zero_speed is a near cusp: where the path turns back across it
     (`_near_cusp_turn`) it is a stop too, a hairpin passed at rest; the others are returned as
     (R,) parameters, where kappa may peak in a needle far narrower than the samples
-    (`_near_cusp_peaks`). Returns (Q,) parameters and cosines, and the (R,) near cusps.
+    (`_near_cusp_peaks`). Returns (Q,) parameters (sorted) and cosines, and the (R,) near
+    cusps.
+
+    The search (`_stop_candidates`) and the classification (`_classify_stops`) are compiled;
+    the sorting between and after them is numpy's, on arrays of a few values: numba compiles
+    a quicksort of its own for each array type, which cost more than a second of the first run.
     """
+    found, near = _stop_candidates(knots, coef, degree, breaks, u, speed, pts, tangent,
+                                   zero_speed, mean_speed, floor_mm)
+    stop_u, stop_cos, bends = _classify_stops(knots, coef, degree, breaks, np.sort(found),
+                                              np.sort(near), floor_mm, kappa_floor)
+    order = np.argsort(stop_u, kind="stable")
+    return stop_u[order], stop_cos[order], bends
+
+
+@jit
+def _stop_candidates(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed,
+                     mean_speed, floor_mm):
+    """Step 3's search (see `_stops`): the zeros of C' found (N,) and the near cusps (R,),
+    unsorted."""
+
     n_ctrl = coef.shape[0]
     last = u.size - 1
-    mean_speed = speed.mean()
     found = np.empty(2 * u.size + breaks.size)
     n = 0
     near = np.empty(2 * u.size)
@@ -661,9 +682,16 @@ def _stops(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed, floo
                 or _speed_on_span(knots, coef, degree, span, knot) <= zero_speed):
             found[n] = knot
             n += 1
-    zeros = np.sort(found[:n])
+    return found[:n], near[:n_near]
+
+
+@jit
+def _classify_stops(knots, coef, degree, breaks, zeros, near, floor_mm, kappa_floor):
+    """Step 3's classification (see `_stops`) of the sorted zeros of C' (N,) and near cusps
+    (R,): the stops' parameters and cosines (Q,), and the near cusps that are no stop."""
+    n = zeros.size
+    n_near = near.size
     resolution = EPS_U * 16.0 * (breaks[breaks.size - 1] - breaks[0])
-    near = np.sort(near[:n_near])
     stop_u = np.empty(n + n_near)
     stop_cos = np.empty(n + n_near)
     m = 0
@@ -698,17 +726,15 @@ def _stops(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed, floo
             stop_u[m] = u0
             stop_cos[m] = cos
             m += 1
-    order = np.argsort(stop_u[:m])
-    return stop_u[:m][order], stop_cos[:m][order], bends[:n_bends]
+    return stop_u[:m], stop_cos[:m], bends[:n_bends]
 
 
 @jit
 def _merge(knots, coef, degree, u, kappa, speed, pts, tan, extra, zero_speed):
-    """Step 4a: the sorted union of the nodes and the extra parameters, with kappa, |C'|, C and
-    the unit tangent (a parameter that is already a node keeps the node's values; kappa NaN
-    where |C'| is 0)."""
+    """Step 4a: the sorted union of the nodes and the sorted extra parameters, with kappa,
+    |C'|, C and the unit tangent (a parameter that is already a node keeps the node's values;
+    kappa NaN where |C'| is 0)."""
     n_ctrl = coef.shape[0]
-    extra = np.sort(extra)
     size = u.size + extra.size
     u_out = np.empty(size)
     k_out = np.empty(size)
@@ -717,7 +743,7 @@ def _merge(knots, coef, degree, u, kappa, speed, pts, tan, extra, zero_speed):
     t_out = np.empty((size, 3))
     i = 0
     j = 0
-    n = 0
+    n = np.int64(0)  # not a literal 0: _unit_tangent(..., n) would compile for Literal[int](0) too
     span = degree
     while i < u.size or j < extra.size:
         if j >= extra.size or (i < u.size and u[i] <= extra[j]):
@@ -839,7 +865,7 @@ def _refine_where_kappa_jumps_or_turns(knots, coef, degree, u, kappa, speed, pts
         p_new = np.empty((size, 3))
         t_new = np.empty((size, 3))
         f_new = np.empty(size, dtype=np.bool_)
-        n = 0
+        n = np.int64(0)  # not a literal 0 (see _merge)
         span = degree
         for q in range(u.size):
             u_new[n] = u[q]
@@ -924,10 +950,16 @@ def _boundary_maxima(knots, coef, degree, breaks, u, peak_u, stop_u):
             # the interval's points in order: its ends, ZOOM_SAMPLES - 2 inside, and the probe
             pts_u = np.empty(ZOOM_SAMPLES + 1)
             pts_k = np.empty(ZOOM_SAMPLES + 1)
+            # evenly spaced points are in order already: the probe goes in after those below
+            # it (sorting them compiled a quicksort)
+            i_probe = 0
             for i in range(ZOOM_SAMPLES):
                 pts_u[i] = low + (high - low) * (i / last) if i < last else high
-            pts_u[ZOOM_SAMPLES] = probe_u
-            pts_u.sort()
+                if pts_u[i] <= probe_u:
+                    i_probe = i + 1
+            for i in range(ZOOM_SAMPLES, i_probe, -1):
+                pts_u[i] = pts_u[i - 1]
+            pts_u[i_probe] = probe_u
             best = 1
             for i in range(pts_u.size):
                 if pts_u[i] == probe_u:
@@ -991,17 +1023,18 @@ def _near_cusp_peaks(knots, coef, degree, u, kappa, near_u, kappa_floor):
     return out[:n]
 
 
-@jit
 def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, floor_mm):
     """Steps 1-4: nodes u, kappa, |C'| (M,), refined peak parameters (P,), stops (Q,) with
     the cosine of their turn (Q,), and the mean |C'| over the samples (the arc length
-    tolerance's scale)."""
-    u, kappa, speed, pts, tan = _samples(knots, coef, degree, breaks, spacing_mm)
-    mean_speed = speed.mean()
+    tolerance's scale).
+
+    The steps are compiled; this driver is not: it runs each once (and the peak refinement once
+    per peak), and its sorting, concatenating and masking of a few values is numpy's, which a
+    compiled driver paid for with a second of compiling numba's quicksort and array functions
+    on the first run."""
+    u, kappa, speed, pts, tan, mean_speed = _samples(knots, coef, degree, breaks, spacing_mm)
     zero_speed = ZERO_SPEED_REL * mean_speed
-    for q in range(u.size):
-        if speed[q] <= zero_speed:
-            kappa[q] = math.nan
+    kappa[speed <= zero_speed] = math.nan
     _fill_singular(kappa)
     idx = _prominent_maxima(kappa)
     peak_u = np.empty(idx.size)
@@ -1011,10 +1044,10 @@ def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, f
         peak_u[k] = refined_u if refined_kappa > kappa[idx[k]] else u[idx[k]]
     corner_u = _corners(knots, coef, degree, breaks, floor_mm)
     zero_u, zero_cos, near_u = _stops(knots, coef, degree, breaks, u, speed, pts, tan,
-                                      zero_speed, floor_mm, kappa_floor)
+                                      zero_speed, mean_speed, floor_mm, kappa_floor)
     stop_u = np.concatenate((corner_u, zero_u))
     stop_cos = np.concatenate((np.zeros(corner_u.size), zero_cos))
-    order = np.argsort(stop_u)
+    order = np.argsort(stop_u, kind="stable")
     stop_u = stop_u[order]
     stop_cos = stop_cos[order]
     # kappa grows without bound into a cusp, so its "maximum" is the refinement's bracket end:
@@ -1024,13 +1057,11 @@ def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, f
         keep[k] = not _holds_any(stop_u, u[idx[k] - 1], u[idx[k] + 1])
     peak_u = peak_u[keep]
     needles = _near_cusp_peaks(knots, coef, degree, u, kappa, near_u, kappa_floor)
-    if needles.size:
-        peak_u = np.concatenate((peak_u, needles))
-    peak_u = np.sort(peak_u)
+    peak_u = np.sort(np.concatenate((peak_u, needles)))
     beside_u = _boundary_maxima(knots, coef, degree, breaks, u, peak_u, stop_u)
     if beside_u.size:
         peak_u = np.sort(np.concatenate((peak_u, beside_u)))
-    extra = np.concatenate((peak_u, stop_u, extra_u))
+    extra = np.sort(np.concatenate((peak_u, stop_u, extra_u)))
     u, kappa, speed, pts, tan = _merge(knots, coef, degree, u, kappa, speed, pts, tan, extra,
                                        zero_speed)
     _fill_singular(kappa)
@@ -1039,8 +1070,7 @@ def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, f
     # a spike of kappa narrower than the samples shows only in the refined grid: its maxima
     # at or above kappa_floor that no peak's bracket holds are peaks too (refined likewise)
     idx = _prominent_maxima(kappa)
-    more = np.empty(idx.size)
-    n_more = 0
+    more = []
     for k in range(idx.size):
         low, high = u[idx[k] - 1], u[idx[k] + 1]
         if kappa[idx[k]] < kappa_floor:
@@ -1048,13 +1078,13 @@ def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, f
         if _holds_any(peak_u, low, high) or _holds_any(stop_u, low, high):
             continue
         refined_u, refined_kappa = _refine_peak(knots, coef, degree, low, high, kappa_floor)
-        more[n_more] = refined_u if refined_kappa > kappa[idx[k]] else u[idx[k]]
-        n_more += 1
-    if n_more:
+        more.append(refined_u if refined_kappa > kappa[idx[k]] else u[idx[k]])
+    if more:
+        added = np.sort(np.array(more))
         u, kappa, speed, pts, tan = _merge(knots, coef, degree, u, kappa, speed, pts, tan,
-                                           more[:n_more], zero_speed)
+                                           added, zero_speed)
         _fill_singular(kappa)
-        peak_u = np.sort(np.concatenate((peak_u, more[:n_more])))
+        peak_u = np.sort(np.concatenate((peak_u, added)))
     return u, kappa, speed, peak_u, stop_u, stop_cos, mean_speed
 
 

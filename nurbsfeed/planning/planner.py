@@ -303,7 +303,10 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
             nodes = checked[:n_checked]
             checked_v = np.empty(n_checked)
             speed_at_arc(t0, s0, v0, a0, jk, duration, s_mm[nodes], limit[nodes], checked_v)
-            v_nodes[nodes] = checked_v
+            # element by element: an assignment through an index array compiles numba's
+            # shape-mismatch message (str, repr, concatenation), a second of the first run
+            for i in range(n_checked):
+                v_nodes[nodes[i]] = checked_v[i]
         if rounds == MAX_FIX_ROUNDS:
             break
         changed = False
@@ -771,10 +774,7 @@ def _optimal_plan(base: Plan, feed_u: np.ndarray, feed_mm_s: np.ndarray,
     rest_keys = base.piece_key
     rest_nodes = base.key_node[rest_keys]
     # the base law's speed at the nodes, as it runs (each stretch slowed by its lambda)
-    v_nodes = np.empty(grid.u.size)
-    speed_at_arc(law.t0_s, law.s0_mm, law.v0_mm_s, law.a0_mm_s2, law.jerk_mm_s3,
-                 law.duration_s, np.ascontiguousarray(grid.s_mm), np.full(grid.u.size, -np.inf),
-                 v_nodes)
+    v_nodes = law.speed_at(grid.s_mm)
     v_nodes /= float(base.piece_scale.max(initial=1.0))
     if lim.planner == "envelope":
         from nurbsfeed.planning.envelope import envelope_schedule

@@ -128,7 +128,9 @@ def speed_at_arc(t0, s0, v0, a0, jk, duration, s_query, floor, out):
       is the previous query's tau in the same piece, moved on by ds / v.
     """
     n = t0.size
-    i = 0
+    # not a literal 0: numba would compile _last_at_or_below for Literal[int](0) as well, while
+    # it types the loop, and never run that version
+    i = np.int64(0)
     tau = 0.0
     for q in range(s_query.size):
         s = s_query[q]
@@ -190,7 +192,7 @@ def evaluate(t0, s0, v0, a0, jk, t, piece, local, v, a, j):
     Increasing times are fastest: the piece is found by a pointer that moves forward, by binary
     search otherwise.
     """
-    i = 0
+    i = np.int64(0)  # not a literal 0 (see speed_at_arc)
     for q in range(t.size):
         tq = t[q]
         i = _last_at_or_below(t0, tq, i)
@@ -223,6 +225,18 @@ class TimeLaw:
         for arr in arrays:
             arr.setflags(write=False)
         return cls(*arrays, duration_s=float(duration_s))
+
+    def speed_at(self, s_mm: np.ndarray) -> np.ndarray:
+        """v where the law passes each arc length s_mm (M,) -> (M,) (see `speed_at_arc`).
+
+        The pieces go in as writable copies: the planner's compiled loop passes writable ones,
+        and a read-only array is another type to numba, a second compilation of the kernel."""
+        s_query = np.array(s_mm, dtype=float)
+        out = np.empty(s_query.size)
+        pieces = (self.t0_s, self.s0_mm, self.v0_mm_s, self.a0_mm_s2, self.jerk_mm_s3)
+        speed_at_arc(*(piece.copy() for piece in pieces), self.duration_s, s_query,
+                     np.full(s_query.size, -np.inf), out)
+        return out
 
     def sample(self, t_s: np.ndarray) -> tuple[np.ndarray, ...]:
         """At times (N,) (increasing is fastest): piece index, arc length within the piece
