@@ -233,8 +233,8 @@ class TimeLaw:
         and a read-only array is another type to numba, a second compilation of the kernel."""
         s_query = np.array(s_mm, dtype=float)
         out = np.empty(s_query.size)
-        pieces = (self.t0_s, self.s0_mm, self.v0_mm_s, self.a0_mm_s2, self.jerk_mm_s3)
-        speed_at_arc(*(piece.copy() for piece in pieces), self.duration_s, s_query,
+        speed_at_arc(self.t0_s.copy(), self.s0_mm.copy(), self.v0_mm_s.copy(),
+                     self.a0_mm_s2.copy(), self.jerk_mm_s3.copy(), self.duration_s, s_query,
                      np.full(s_query.size, -np.inf), out)
         return out
 
