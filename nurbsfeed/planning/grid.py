@@ -214,10 +214,17 @@ def _prominent_maxima(kappa):
             n += 1
     keep = np.empty(n, dtype=np.int64)
     kept = 0
-    left_valley = kappa[0:cand[0]].min() if n > 0 else 0.0
+    # the valleys' minima by loops: ndarray.min would compile numba's own reduction
+    left_valley = 0.0
+    if n > 0:
+        left_valley = kappa[0]
+        for q in range(1, cand[0]):
+            left_valley = min(left_valley, kappa[q])
     for k in range(n):
         stop = cand[k + 1] if k + 1 < n else kappa.size
-        right_valley = kappa[cand[k]:stop].min()
+        right_valley = kappa[cand[k]]
+        for q in range(cand[k] + 1, stop):
+            right_valley = min(right_valley, kappa[q])
         if kappa[cand[k]] > max(left_valley, right_valley) * (1.0 + PEAK_PROMINENCE_REL):
             keep[kept] = cand[k]
             kept += 1
@@ -367,20 +374,17 @@ def _refine_peak(knots, coef, degree, low, high, kappa_floor):
         span = find_span(knots, degree, n_ctrl, piece_low, span)
 
 
-@jit
 def _corners(knots, coef, degree, breaks, floor_mm):
     """Step 3a: interior knots of multiplicity >= degree where the unit tangent jumps (not
-    where the curve has no length on one side: that is an end)."""
+    where the curve has no length on one side: that is an end). Not compiled (its kernels
+    are): it looks at each knot once."""
     n_ctrl = coef.shape[0]
     eps = CORNER_PROBE_REL * (breaks[breaks.size - 1] - breaks[0])
     out = np.empty(max(breaks.size - 2, 0))
     n = 0
     for b in range(1, breaks.size - 1):
         knot = breaks[b]
-        mult = 0
-        for k in knots:
-            mult += k == knot
-        if mult < degree:
+        if np.count_nonzero(knots == knot) < degree:
             continue
         _, _, _, h_before = _chord_from(knots, coef, degree, knot, -1.0,
                                         knot - breaks[b - 1], breaks[0], floor_mm)
@@ -595,16 +599,53 @@ def _stops(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed, mean
     (`_near_cusp_peaks`). Returns (Q,) parameters (sorted) and cosines, and the (R,) near
     cusps.
 
-    The search (`_stop_candidates`) and the classification (`_classify_stops`) are compiled;
-    the sorting between and after them is numpy's, on arrays of a few values: numba compiles
-    a quicksort of its own for each array type, which cost more than a second of the first run.
+    The search over the samples (`_stop_candidates`) is compiled; the classification of the
+    few candidates it finds is not (its kernels are), nor is the sorting: numba compiles a
+    quicksort and a binary search of its own for each array type, seconds of the first run
+    for arrays of a few values.
     """
     found, near = _stop_candidates(knots, coef, degree, breaks, u, speed, pts, tangent,
                                    zero_speed, mean_speed, floor_mm)
-    stop_u, stop_cos, bends = _classify_stops(knots, coef, degree, breaks, np.sort(found),
-                                              np.sort(near), floor_mm, kappa_floor)
-    order = np.argsort(stop_u, kind="stable")
-    return stop_u[order], stop_cos[order], bends
+    zeros, near = np.sort(found), np.sort(near)
+    n = zeros.size
+    n_near = near.size
+    resolution = EPS_U * 16.0 * (breaks[breaks.size - 1] - breaks[0])
+    stop_u = np.empty(n + n_near)
+    stop_cos = np.empty(n + n_near)
+    m = 0
+    bends = np.empty(n_near)
+    n_bends = 0
+    for i in range(n_near):
+        u0 = near[i]
+        if (i > 0 and u0 - near[i - 1] <= resolution) or u0 <= breaks[0] or (
+                u0 >= breaks[breaks.size - 1]):
+            continue
+        cos = _near_cusp_turn(knots, coef, degree, u0)
+        if cos < 0.0:
+            stop_u[m] = u0
+            stop_cos[m] = cos
+            m += 1
+        else:
+            bends[n_bends] = u0
+            n_bends += 1
+    for i in range(n):
+        u0 = zeros[i]
+        if (i > 0 and u0 - zeros[i - 1] <= resolution) or u0 <= breaks[0] or (
+                u0 >= breaks[breaks.size - 1]):
+            continue
+        b = int(np.searchsorted(breaks, u0, side="right"))  # breaks[b - 1] <= u0 < breaks[b]
+        width_after = breaks[b] - breaks[b - 1]
+        width_before = width_after
+        if u0 == breaks[b - 1] and b >= 2:  # on a knot: the span before it
+            width_before = breaks[b - 1] - breaks[b - 2]
+        smooth, cos = _zero_is_smooth(knots, coef, degree, u0, width_before, width_after,
+                                      floor_mm, kappa_floor)
+        if not smooth:
+            stop_u[m] = u0
+            stop_cos[m] = cos
+            m += 1
+    order = np.argsort(stop_u[:m], kind="stable")
+    return stop_u[:m][order], stop_cos[:m][order], bends[:n_bends]
 
 
 @jit
@@ -683,50 +724,6 @@ def _stop_candidates(knots, coef, degree, breaks, u, speed, pts, tangent, zero_s
             found[n] = knot
             n += 1
     return found[:n], near[:n_near]
-
-
-@jit
-def _classify_stops(knots, coef, degree, breaks, zeros, near, floor_mm, kappa_floor):
-    """Step 3's classification (see `_stops`) of the sorted zeros of C' (N,) and near cusps
-    (R,): the stops' parameters and cosines (Q,), and the near cusps that are no stop."""
-    n = zeros.size
-    n_near = near.size
-    resolution = EPS_U * 16.0 * (breaks[breaks.size - 1] - breaks[0])
-    stop_u = np.empty(n + n_near)
-    stop_cos = np.empty(n + n_near)
-    m = 0
-    bends = np.empty(n_near)
-    n_bends = 0
-    for i in range(n_near):
-        u0 = near[i]
-        if (i > 0 and u0 - near[i - 1] <= resolution) or u0 <= breaks[0] or (
-                u0 >= breaks[breaks.size - 1]):
-            continue
-        cos = _near_cusp_turn(knots, coef, degree, u0)
-        if cos < 0.0:
-            stop_u[m] = u0
-            stop_cos[m] = cos
-            m += 1
-        else:
-            bends[n_bends] = u0
-            n_bends += 1
-    for i in range(n):
-        u0 = zeros[i]
-        if (i > 0 and u0 - zeros[i - 1] <= resolution) or u0 <= breaks[0] or (
-                u0 >= breaks[breaks.size - 1]):
-            continue
-        b = np.searchsorted(breaks, u0, side="right")  # breaks[b - 1] <= u0 < breaks[b]
-        width_after = breaks[b] - breaks[b - 1]
-        width_before = width_after
-        if u0 == breaks[b - 1] and b >= 2:  # on a knot: the span before it
-            width_before = breaks[b - 1] - breaks[b - 2]
-        smooth, cos = _zero_is_smooth(knots, coef, degree, u0, width_before, width_after,
-                                      floor_mm, kappa_floor)
-        if not smooth:
-            stop_u[m] = u0
-            stop_cos[m] = cos
-            m += 1
-    return stop_u[:m], stop_cos[:m], bends[:n_bends]
 
 
 @jit
@@ -928,7 +925,7 @@ def _boundary_maxima(knots, coef, degree, breaks, u, peak_u, stop_u):
     n = 0
     last = ZOOM_SAMPLES - 1
     for b in range(breaks.size):
-        at = np.searchsorted(u, breaks[b])  # the samples hold every break exactly
+        at = first_at_or_above(u, breaks[b])  # the samples hold every break exactly
         for side in (-1, 1):
             beside = at + side
             if beside < 0 or beside >= u.size:
@@ -982,13 +979,28 @@ def _boundary_maxima(knots, coef, degree, breaks, u, peak_u, stop_u):
 
 
 @jit
-def _holds_any(sorted_u, low, high):
-    """Whether sorted_u (K,) has a value in [low, high]."""
-    q = np.searchsorted(sorted_u, low)
-    return q < sorted_u.size and sorted_u[q] <= high
+def first_at_or_above(sorted_x, x):
+    """The first index q with sorted_x[q] >= x (sorted_x.size if none): np.searchsorted's left
+    side, by bisection written out, since numba's np.searchsorted compiles its own search and
+    comparators per array type."""
+    lo = 0
+    hi = sorted_x.size
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if sorted_x[mid] < x:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
 
 
 @jit
+def _holds_any(sorted_u, low, high):
+    """Whether sorted_u (K,) has a value in [low, high]."""
+    q = first_at_or_above(sorted_u, low)
+    return q < sorted_u.size and sorted_u[q] <= high
+
+
 def _near_cusp_peaks(knots, coef, degree, u, kappa, near_u, kappa_floor):
     """Step 2c: the curvature peaks of near cusps (R,) that the samples do not show.
 
@@ -999,14 +1011,14 @@ def _near_cusp_peaks(knots, coef, degree, u, kappa, near_u, kappa_floor):
     either side of a peak of 2.4e7, which the plan then passed at 0.11 mm/s, its velocity
     reversing within one period. The peak lies beside the minimum of |C'|: each near cusp
     whose kappa reaches kappa_floor and exceeds both samples around it is refined over a few
-    needle widths about it.
+    needle widths about it. Not compiled (its kernels are): there are a few near cusps.
     """
     n_ctrl = coef.shape[0]
     out = np.empty(near_u.size)
     n = 0
     for r in range(near_u.size):
         u0 = near_u[r]
-        q = min(max(np.searchsorted(u, u0, side="right") - 1, 0), u.size - 2)
+        q = min(max(int(np.searchsorted(u, u0, side="right")) - 1, 0), u.size - 2)
         span = find_span(knots, degree, n_ctrl, u0, degree)
         c = point_d2(knots, coef, degree, span, u0)
         k0, speed0 = curvature(c[3], c[4], c[5], c[6], c[7], c[8])

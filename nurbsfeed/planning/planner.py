@@ -41,7 +41,13 @@ import numpy as np
 from nurbsfeed.errors import CurveError
 from nurbsfeed.geometry.nurbs import NurbsCurve, curvature_from_derivatives
 from nurbsfeed.jit import jit
-from nurbsfeed.planning.grid import ZERO_SPEED_REL, Grid, build_grid, polygon_length
+from nurbsfeed.planning.grid import (
+    ZERO_SPEED_REL,
+    Grid,
+    build_grid,
+    first_at_or_above,
+    polygon_length,
+)
 from nurbsfeed.planning.limits import Limits, curvature_threshold, speed_limit
 from nurbsfeed.planning.path_model import (
     frames,
@@ -165,7 +171,11 @@ def _key_points(kappa, raw_limit, fcap, stop_index, stop_cos, peak_index, feed_n
     """
     size = kappa.size
     last = size - 1
-    kind = np.full(size, -1, dtype=np.int64)
+    # loops rather than np.full, np.flatnonzero, index arrays and np.searchsorted: each of
+    # those compiles numba's own implementation, together a second of the first run
+    kind = np.empty(size, dtype=np.int64)
+    for n in range(size):
+        kind[n] = -1
     kind[0] = KIND_END
     kind[last] = KIND_END
     for n in feed_nodes:
@@ -199,16 +209,31 @@ def _key_points(kappa, raw_limit, fcap, stop_index, stop_cos, peak_index, feed_n
             limit[n] = min(limit[n], borrowed[n + 1])
         if kind[n] == KIND_CORNER or kind[n] == KIND_CUSP:
             limit[n] = 0.0
-    key_node = np.flatnonzero(kind >= 0)
-    key_kind = kind[key_node]
-    nominal = limit[key_node]
+    n_keys = 0
+    for n in range(size):
+        if kind[n] >= 0:
+            n_keys += 1
+    key_node = np.empty(n_keys, dtype=np.int64)
+    key_kind = np.empty(n_keys, dtype=np.int64)
+    nominal = np.empty(n_keys)
+    keys_before = np.empty(size, dtype=np.int64)  # per node, the key nodes below it
+    k = 0
+    for n in range(size):
+        keys_before[n] = k
+        if kind[n] >= 0:
+            key_node[k] = n
+            key_kind[k] = kind[n]
+            nominal[k] = limit[n]
+            k += 1
     for k in range(key_node.size):
         if key_kind[k] == KIND_END or key_kind[k] == KIND_CORNER or key_kind[k] == KIND_CUSP:
             nominal[k] = 0.0
     for n in feed_nodes:
-        k = np.searchsorted(key_node, n)
+        k = keys_before[n] if n < size else n_keys
         nominal[k] = min(nominal[k], fcap[max(n - 1, 0)], fcap[n])
-    cap = np.full(key_node.size - 1, feed_cap)
+    cap = np.empty(key_node.size - 1)
+    for k in range(cap.size):
+        cap[k] = feed_cap
     seg = 0
     for n in range(size):
         if seg + 1 < cap.size and n >= key_node[seg + 1]:
@@ -412,7 +437,7 @@ def _hidden_peak(seg, s_mm, limit, key_node, key_s, v, peak, hold_start, hold_en
         return math.nan, math.nan
     accel_end = key_s[seg] + hold_start[seg] + d_up[seg]
     decel_start = max(key_s[seg + 1] - hold_end[seg] - d_down[seg], accel_end)
-    after = np.searchsorted(s_mm, accel_end, side="left")  # the first node at or after it
+    after = first_at_or_above(s_mm, accel_end)  # the first node at or after it
     if after < s_mm.size and s_mm[after] <= decel_start:
         return math.nan, math.nan  # a node in the cruise: checked
     if (after <= key_node[seg] or after > key_node[seg + 1]
