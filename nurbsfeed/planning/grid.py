@@ -132,6 +132,7 @@ def _samples(knots, coef, degree, breaks, spacing_mm):
     n_ctrl = coef.shape[0]
     n_spans = breaks.size - 1
     counts = np.empty(n_spans, dtype=np.int64)
+    n_nodes = 1  # the last break
     span = degree
     for i in range(n_spans):
         width = breaks[i + 1] - breaks[i]
@@ -145,7 +146,8 @@ def _samples(knots, coef, degree, breaks, spacing_mm):
             chord += math.sqrt((qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2)
             px, py, pz = qx, qy, qz
         counts[i] = max(MIN_NODES_PER_SPAN, math.ceil(1.05 * chord / spacing_mm))
-    u_nodes = np.empty(counts.sum() + 1)
+        n_nodes += counts[i]
+    u_nodes = np.empty(n_nodes)
     q = 0
     for i in range(n_spans):
         step = (breaks[i + 1] - breaks[i]) / counts[i]
@@ -810,9 +812,13 @@ def _refine_where_kappa_jumps_or_turns(knots, coef, degree, u, kappa, speed, pts
     n_ctrl = coef.shape[0]
     most = REFINE_GROWTH_MAX * u.size
     # only intervals made in the last round are looked at: the others' ends are unchanged
-    fresh = np.ones(u.size, dtype=np.bool_)
+    fresh = np.empty(u.size, dtype=np.bool_)
+    for q in range(u.size):  # not np.ones or np.zeros: numba compiles its own per type
+        fresh[q] = True
     for rounds in range(TURN_REFINE_ROUNDS):
-        split = np.zeros(u.size, dtype=np.bool_)
+        split = np.empty(u.size, dtype=np.bool_)
+        for q in range(u.size):
+            split[q] = False
         n_split = 0
         for q in range(u.size - 1):
             if not fresh[q]:

@@ -298,10 +298,14 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
     n_seg = length.size
     # a segment's profile (hence v at its nodes) depends on its end speeds, peak and holds only:
     # what they were when its nodes were last checked (NaN: never)
-    seen = np.full((n_seg, 5), np.nan)
+    seen = np.empty((n_seg, 5))
     v_nodes = np.zeros(s_mm.size)
     checked = np.empty(s_mm.size, dtype=np.int64)
-    shoulder_at = np.full(n_seg, -1, dtype=np.int64)
+    shoulder_at = np.empty(n_seg, dtype=np.int64)
+    for seg in range(n_seg):  # loops, not np.full: numba compiles its own per type
+        shoulder_at[seg] = -1
+        for k in range(5):
+            seen[seg, k] = np.nan
     rounds = 0
     while True:
         free = np.maximum(length - hold_start - hold_end, 0.0)

@@ -53,12 +53,19 @@ def chain_segments(s_key, v_key, v_peak, hold_start, hold_end, acc, jerk):
             jerks[n] = 0.0
             n += 1
         m = transition_phases(va, vp, acc, jerk, durations[n:], jerks[n:])
-        d_up = 0.5 * (va + vp) * durations[n:n + m].sum()
+        # durations summed by loops: ndarray.sum would compile numba's own reduction
+        t_up = 0.0
+        for q in range(n, n + m):
+            t_up += durations[q]
+        d_up = 0.5 * (va + vp) * t_up
         n += m
         n_cruise = n
         n += 1
         m = transition_phases(vp, vb, acc, jerk, durations[n:], jerks[n:])
-        d_down = 0.5 * (vp + vb) * durations[n:n + m].sum()
+        t_down = 0.0
+        for q in range(n, n + m):
+            t_down += durations[q]
+        d_down = 0.5 * (vp + vb) * t_down
         n += m
         if hold_end[i] > 0.0 and vb > 0.0:
             durations[n] = hold_end[i] / vb
