@@ -601,14 +601,43 @@ def _stops(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed, mean
     (`_near_cusp_peaks`). Returns (Q,) parameters (sorted) and cosines, and the (R,) near
     cusps.
 
-    The search over the samples (`_stop_candidates`) is compiled; the classification of the
-    few candidates it finds is not (its kernels are), nor is the sorting: numba compiles a
-    quicksort and a binary search of its own for each array type, seconds of the first run
-    for arrays of a few values.
+    The search over the samples (`_stop_candidates`) is compiled; the refinement and the
+    classification of the few candidates it finds are not (their kernels are, the first time a
+    curve has such a candidate), nor is the sorting: numba compiles a quicksort and a binary
+    search of its own for each array type, seconds of the first run for a few values.
     """
-    found, near = _stop_candidates(knots, coef, degree, breaks, u, speed, pts, tangent,
-                                   zero_speed, mean_speed, floor_mm)
-    zeros, near = np.sort(found), np.sort(near)
+    found_u, minima, turns = _stop_candidates(knots, coef, degree, breaks, u, speed, pts,
+                                              tangent, zero_speed, mean_speed, floor_mm)
+    found, near = list(found_u), []
+    near_speed = ZERO_CANDIDATE_REL * mean_speed
+    for q in minima:
+        # from the sample and from the middle of each interval beside it: the zero may lie
+        # just before a knot whose sample is taken on the span after it
+        best_speed = np.inf
+        at = u[q]
+        for start in (u[q], 0.5 * (u[q - 1] + u[q]), 0.5 * (u[q] + u[q + 1])):
+            here, here_speed = _refine_zero(knots, coef, degree, start, u[q - 1], u[q + 1])
+            if here_speed < best_speed:
+                at, best_speed = here, here_speed
+        if best_speed <= zero_speed:
+            found.append(at)
+        elif best_speed <= near_speed:
+            near.append(at)
+    for q in turns:
+        at, at_speed = _refine_zero(knots, coef, degree, 0.5 * (u[q] + u[q + 1]), u[q],
+                                    u[q + 1])
+        if at_speed > zero_speed:
+            # Gauss-Newton from the middle can leave for the bracket's end and stay there (C''
+            # jumps at a knot of multiplicity 2); the tangent's component along the first
+            # sample's changes sign inside, and bisecting it brackets the turn
+            start = _turn_back(knots, coef, degree, tangent[q, 0], tangent[q, 1],
+                               tangent[q, 2], u[q], u[q + 1])
+            at, at_speed = _refine_zero(knots, coef, degree, start, u[q], u[q + 1])
+        if at_speed <= zero_speed:
+            found.append(at)
+        elif at_speed <= near_speed:  # not a corner's flip of the tangent
+            near.append(at)
+    zeros, near = np.sort(np.array(found, dtype=float)), np.sort(np.array(near, dtype=float))
     n = zeros.size
     n_near = near.size
     resolution = EPS_U * 16.0 * (breaks[breaks.size - 1] - breaks[0])
@@ -653,15 +682,19 @@ def _stops(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed, mean
 @jit
 def _stop_candidates(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed,
                      mean_speed, floor_mm):
-    """Step 3's search (see `_stops`): the zeros of C' found (N,) and the near cusps (R,),
-    unsorted."""
-
+    """Step 3's search over the samples (see `_stops`): the zeros of C' it finds without
+    refining (N,: first samples of runs at rest, and knots), the samples (I,) at a local
+    minimum of |C'| that needs refining, and the intervals (J,) across which the path turns
+    back. The refinements are `_stops`' (rare: most curves have none, and their kernels then
+    never compile)."""
     n_ctrl = coef.shape[0]
     last = u.size - 1
-    found = np.empty(2 * u.size + breaks.size)
+    found = np.empty(u.size + breaks.size)
     n = 0
-    near = np.empty(2 * u.size)
-    n_near = 0
+    minima = np.empty(u.size, dtype=np.int64)
+    n_minima = 0
+    turns = np.empty(u.size, dtype=np.int64)
+    n_turns = 0
     for q in range(1, last):
         if (speed[q] > speed[q - 1] or speed[q] > speed[q + 1]
                 or speed[q] > ZERO_CANDIDATE_REL * mean_speed):
@@ -671,20 +704,8 @@ def _stop_candidates(knots, coef, degree, breaks, u, speed, pts, tangent, zero_s
                 found[n] = u[q]
                 n += 1
             continue
-        # from the sample and from the middle of each interval beside it: the zero may lie
-        # just before a knot whose sample is taken on the span after it
-        best_speed = np.inf
-        at = u[q]
-        for start in (u[q], 0.5 * (u[q - 1] + u[q]), 0.5 * (u[q] + u[q + 1])):
-            here, here_speed = _refine_zero(knots, coef, degree, start, u[q - 1], u[q + 1])
-            if here_speed < best_speed:
-                at, best_speed = here, here_speed
-        if best_speed <= zero_speed:
-            found[n] = at
-            n += 1
-        elif best_speed <= ZERO_CANDIDATE_REL * mean_speed:
-            near[n_near] = at
-            n_near += 1
+        minima[n_minima] = q
+        n_minima += 1
     # a cusp or reversal between two samples need not show as a minimum of |C'| on them (|C'|
     # may fall on through it); the tangent turning back by more than 90 degrees does, and so
     # does a chord going back along the first sample's tangent (by more than floor_mm, beyond
@@ -701,21 +722,8 @@ def _stop_candidates(knots, coef, degree, breaks, u, speed, pts, tangent, zero_s
         if speed[q] <= zero_speed or speed[q + 1] <= zero_speed or (
                 turn >= 0.0 and ahead >= -floor_mm):
             continue
-        at, at_speed = _refine_zero(knots, coef, degree, 0.5 * (u[q] + u[q + 1]), u[q],
-                                    u[q + 1])
-        if at_speed > zero_speed:
-            # Gauss-Newton from the middle can leave for the bracket's end and stay there (C''
-            # jumps at a knot of multiplicity 2); the tangent's component along the first
-            # sample's changes sign inside, and bisecting it brackets the turn
-            start = _turn_back(knots, coef, degree, tangent[q, 0], tangent[q, 1],
-                               tangent[q, 2], u[q], u[q + 1])
-            at, at_speed = _refine_zero(knots, coef, degree, start, u[q], u[q + 1])
-        if at_speed <= zero_speed:
-            found[n] = at
-            n += 1
-        elif at_speed <= ZERO_CANDIDATE_REL * mean_speed:  # not a corner's flip of the tangent
-            near[n_near] = at
-            n_near += 1
+        turns[n_turns] = q
+        n_turns += 1
     span = degree
     for b in range(1, breaks.size - 1):
         knot = breaks[b]
@@ -725,7 +733,7 @@ def _stop_candidates(knots, coef, degree, breaks, u, speed, pts, tangent, zero_s
                 or _speed_on_span(knots, coef, degree, span, knot) <= zero_speed):
             found[n] = knot
             n += 1
-    return found[:n], near[:n_near]
+    return found[:n], minima[:n_minima], turns[:n_turns]
 
 
 @jit
