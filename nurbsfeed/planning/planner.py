@@ -293,14 +293,23 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
     long stretch of a steep limit: a near cusp); and, per segment, the stretch [from, to] of arc
     length where its peak speed hides between two nodes ((K-1, 2); NaN: none).
     """
-    key_s = s_mm[key_node]
-    length = key_s[1:] - key_s[:-1]
-    n_seg = length.size
+    # loops rather than index arrays and array expressions, here and below: numba compiles
+    # each of those into code of its own, a second of the first run for this kernel alone
+    n_seg = key_node.size - 1
+    key_s = np.empty(n_seg + 1)
+    for k in range(n_seg + 1):
+        key_s[k] = s_mm[key_node[k]]
+    length = np.empty(n_seg)
+    free = np.empty(n_seg)
+    for seg in range(n_seg):
+        length[seg] = key_s[seg + 1] - key_s[seg]
     # a segment's profile (hence v at its nodes) depends on its end speeds, peak and holds only:
     # what they were when its nodes were last checked (NaN: never)
     seen = np.empty((n_seg, 5))
     v_nodes = np.zeros(s_mm.size)
     checked = np.empty(s_mm.size, dtype=np.int64)
+    checked_s = np.empty(s_mm.size)
+    checked_limit = np.empty(s_mm.size)
     shoulder_at = np.empty(n_seg, dtype=np.int64)
     for seg in range(n_seg):  # loops, not np.full: numba compiles its own per type
         shoulder_at[seg] = -1
@@ -308,7 +317,9 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
             seen[seg, k] = np.nan
     rounds = 0
     while True:
-        free = np.maximum(length - hold_start - hold_end, 0.0)
+        for seg in range(n_seg):
+            gap = length[seg] - hold_start[seg] - hold_end[seg]
+            free[seg] = 0.0 if gap < 0.0 else gap  # np.maximum's: NaN and -0.0 stay
         v = scan_speeds(nominal, free, cap, acc, jerk)
         peak, d_up, d_down = segment_profiles(v, free, cap, acc, jerk)
         t0, s0, v0, a0, jk, key_t, duration = chain_segments(key_s, v, peak, hold_start,
@@ -327,15 +338,17 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
                 seen[seg, k] = profile[k]
             for node in range(key_node[seg] + 1, key_node[seg + 1]):
                 checked[n_checked] = node
+                checked_s[n_checked] = s_mm[node]
+                checked_limit[n_checked] = limit[node]
                 n_checked += 1
         if t0.size and n_checked:
-            nodes = checked[:n_checked]
             checked_v = np.empty(n_checked)
-            speed_at_arc(t0, s0, v0, a0, jk, duration, s_mm[nodes], limit[nodes], checked_v)
+            speed_at_arc(t0, s0, v0, a0, jk, duration, checked_s[:n_checked],
+                         checked_limit[:n_checked], checked_v)
             # element by element: an assignment through an index array compiles numba's
             # shape-mismatch message (str, repr, concatenation), a second of the first run
             for i in range(n_checked):
-                v_nodes[nodes[i]] = checked_v[i]
+                v_nodes[checked[i]] = checked_v[i]
         if rounds == MAX_FIX_ROUNDS:
             break
         changed = False
