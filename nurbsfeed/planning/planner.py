@@ -526,8 +526,10 @@ def _plan_on_grid(grid: Grid, raw_limit, fcap, feed_nodes, kappa0: float, lim: L
             feed_nodes, kappa0, lim.feed_mm_s, shoulders)
         hold_start = np.zeros(len(key_node) - 1)
         hold_end = np.zeros(len(key_node) - 1)
+        # a writable copy of the arc lengths: the grid's search kernel (first_at_or_above) is
+        # compiled for writable arrays, and a read-only one would compile it a second time
         v, peak, *pieces, key_t, duration, v_nodes, rounds, shoulder_at, hidden_peak_s = \
-            _limit_rounds(grid.s_mm, limit, key_node, nominal, cap, hold_start, hold_end,
+            _limit_rounds(grid.s_mm.copy(), limit, key_node, nominal, cap, hold_start, hold_end,
                           acc, jerk, HOLD_MAX_PERIODS * lim.period_s, lim.jerk_model == "path")
         if not (shoulder_at >= 0).any():  # (the common case: setdiff1d costs ~50 us)
             break
