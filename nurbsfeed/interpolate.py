@@ -328,7 +328,7 @@ def step_spans(method, knots, coef, degree, n_spans, u0, ds, sigma, slow_speed, 
     solved exactly across a knot, `_chord_step`; a step beside a point where C' vanishes,
     `_leg_step`) it hands back, and they are taken here. Those kernels, and the arc-length
     search they use, compile the first time a curve needs them: many conversions never do,
-    and compiling them with the loop cost ~2 s of every first run.
+    and compiling them with the loop would cost ~2 s of every first run.
     """
     k, u, span = 0, u0, degree
     while True:

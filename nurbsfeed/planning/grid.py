@@ -110,7 +110,7 @@ class Grid:
 
 def polygon_length(points):
     """Length of the control polygon (N, 3): the curve is no longer. The legs are summed in
-    order (np.cumsum), as the compiled loop this replaced did: numpy's sum pairs them."""
+    order (np.cumsum; np.sum pairs them): the grid's tolerances derive from the last bits."""
     leg = np.diff(points, axis=0)
     lengths = np.sqrt(leg[:, 0] ** 2 + leg[:, 1] ** 2 + leg[:, 2] ** 2)
     return float(np.cumsum(lengths)[-1]) if lengths.size else 0.0
@@ -122,7 +122,7 @@ def _samples(knots, coef, degree, breaks, spacing_mm):
     estimated by CHORD_PROBES chords, plus 5 %), at least MIN_NODES_PER_SPAN; the last break
     closes the list. Returns u, kappa, |C'| at the nodes (M,), C and the unit tangent there
     (M, 3; the tangent from the span after a knot, 0 where C' = 0), and the mean of |C'| over
-    the nodes (summed in order, as numba's `ndarray.mean` did). At an interior
+    the nodes (summed in order). At an interior
     knot kappa is the higher of its limits from the two sides (it jumps where the curve is
     only C1), so that no node understates the curvature around it; a side where |C'| is below
     ZERO_SPEED_REL of the other's does not count (its kappa is rounding noise)."""
@@ -959,7 +959,7 @@ def _boundary_maxima(knots, coef, degree, breaks, u, peak_u, stop_u):
             pts_u = np.empty(ZOOM_SAMPLES + 1)
             pts_k = np.empty(ZOOM_SAMPLES + 1)
             # evenly spaced points are in order already: the probe goes in after those below
-            # it (sorting them compiled a quicksort)
+            # it (sorting them would compile numba's quicksort)
             i_probe = 0
             for i in range(ZOOM_SAMPLES):
                 pts_u[i] = low + (high - low) * (i / last) if i < last else high
@@ -1052,9 +1052,9 @@ def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, f
     tolerance's scale).
 
     The steps are compiled; this driver is not: it runs each once (and the peak refinement once
-    per peak), and its sorting, concatenating and masking of a few values is numpy's, which a
-    compiled driver paid for with a second of compiling numba's quicksort and array functions
-    on the first run."""
+    per peak), and its sorting, concatenating and masking of a few values is numpy's, which in
+    compiled code would cost seconds of the first run compiling numba's own quicksort and array
+    functions."""
     u, kappa, speed, pts, tan, mean_speed = _samples(knots, coef, degree, breaks, spacing_mm)
     zero_speed = ZERO_SPEED_REL * mean_speed
     kappa[speed <= zero_speed] = math.nan

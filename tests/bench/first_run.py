@@ -5,7 +5,8 @@
 
 Runs `nurbsfeed convert` in a new process with an empty numba cache (NUMBA_CACHE_DIR in a
 temporary directory, so the in-tree cache is left alone), then again with the cache it filled,
-and prints both wall times, every kernel the first run compiled with its compile time (its own,
+and prints the wall and CPU time of both and the load before them (on a shared machine the CPU
+time is the steadier), every kernel the first run compiled with its compile time (its own,
 callees excluded, from numba's event API) and any kernel compiled for more than one signature.
 nurbsfeed.jit.FIRST_COMPILE_S, which the compile notice quotes, comes from this measurement.
 """
