@@ -69,6 +69,8 @@ from nurbsfeed.planning.planner import Plan
 from nurbsfeed.planning.timelaw import TimeLaw, evaluate
 
 METHODS = {name: code for code, name in enumerate(METHOD_NAMES)}  # name -> kernel code
+# what `_step_run` stopped for: the end, or a step it hands back to `_chord_step` or `_leg_step`
+STEP_DONE, STEP_CHORD, STEP_LEG = 0, 1, 2
 CHUNK_PERIODS = 65536  # periods of a stretch sampled, stepped or held in memory at a time
 SLOW_SPEED_REL = 1e-3  # |C'| below this fraction of the mean |C'| is treated as "zero"
 # rk2c / rk4: when |C'| changes by more than this fraction across one step, the step is next to
@@ -315,19 +317,45 @@ def _chord_step(knots, coef, degree, n_ctrl, u, px, py, pz, ds, lo, guess, span)
     return lo if -g_lo < g_hi else hi
 
 
-@jit
 def step_spans(method, knots, coef, degree, n_spans, u0, ds, sigma, slow_speed, u_out, p_out):
     """Step from u0 through the targets sigma * ds (N,): u_out (N+1,), p_out (N+1, 3) = C(u_k).
 
     coef: the curve's span polynomials (geometry.kernel.span_polynomials). Spans past index
     n_spans - 1 are not used: beyond the end of the stretch the last span's polynomial
     extrapolates, so the landing search sees a smooth continuation even at a corner.
+
+    The stepping loop is compiled (`_step_run`); the steps it cannot take itself (a chord
+    solved exactly across a knot, `_chord_step`; a step beside a point where C' vanishes,
+    `_leg_step`) it hands back, and they are taken here. Those kernels, and the arc-length
+    search they use, compile the first time a curve needs them: many conversions never do,
+    and compiling them with the loop would cost ~2 s of every first run.
     """
+    k, u, span = 0, u0, degree
+    while True:
+        k, stop, guess, span = _step_run(method, knots, coef, degree, n_spans, k, u, span, ds,
+                                         sigma, slow_speed, u_out, p_out)
+        if stop == STEP_DONE:
+            return
+        u, h = u_out[k], sigma * ds[k]
+        px, py, pz = p_out[k]
+        if stop == STEP_CHORD:
+            u = u + _chord_step(knots, coef, degree, n_spans, u, px, py, pz, h, 0.0, guess, span)
+        else:
+            u = u + _leg_step(knots, coef, degree, n_spans, u, px, py, pz, h, guess, span)
+        k += 1
+
+
+@jit
+def _step_run(method, knots, coef, degree, n_spans, k0, u0, span0, ds, sigma, slow_speed, u_out,
+              p_out):
+    """`step_spans`' loop from point k0 at u0 (span0: where to look for its span first) to the
+    end: returns (N, STEP_DONE, 0, span), or, where the step from a point k needs a kernel it
+    does not call, (k, STEP_CHORD or STEP_LEG, that kernel's guess of du, the span of u_k)."""
     n_ctrl = n_spans
     u_range = knots[knots.size - 1] - knots[0]
     u = u0
-    span = find_span(knots, degree, n_ctrl, u, degree)
-    for k in range(ds.size + 1):
+    span = span0
+    for k in range(k0, ds.size + 1):
         span = find_span(knots, degree, n_ctrl, u, span)
         px, py, pz, dx, dy, dz = point_d1(knots, coef, degree, span, u)
         u_out[k] = u
@@ -400,11 +428,8 @@ def step_spans(method, knots, coef, degree, n_spans, u0, ds, sigma, slow_speed, 
                         qx, qy, qz, _, _, _ = point_d1(knots, coef, degree, s3, ut)
                         chord = math.sqrt((qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2)
                         if abs(chord - h) > KNOT_CHORD_REL * h:
-                            u = u + _chord_step(knots, coef, degree, n_ctrl, u, px, py, pz, h,
-                                                0.0,
-                                                min(ut - u, u_range) if ut > u else h / speed,
-                                                span)
-                            continue
+                            return (k, STEP_CHORD,
+                                    min(ut - u, u_range) if ut > u else h / speed, span)
                     u = ut
                     continue
         # Beside a point where C' (nearly) vanishes the curve can turn back within one step,
@@ -413,8 +438,8 @@ def step_spans(method, knots, coef, degree, n_spans, u0, ds, sigma, slow_speed, 
         # from positions, a landing residual jumping with sigma). `_leg_step` keeps to the
         # leg the arc reaches.
         guess = h / slow_speed if speed < slow_speed else h / speed
-        guess = min(guess, u_range)
-        u = u + _leg_step(knots, coef, degree, n_ctrl, u, px, py, pz, h, guess, span)
+        return k, STEP_LEG, min(guess, u_range), span
+    return ds.size, STEP_DONE, 0.0, span
 
 
 @jit

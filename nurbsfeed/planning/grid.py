@@ -4,7 +4,7 @@ The grid has nodes at every knot and enough nodes inside each span that consecut
 at most `spacing_mm` apart; refined curvature maxima are nodes too. The planner checks its speed
 profile at these nodes ("limits everywhere"), so the spacing is tied to the step length v_m T.
 
-Building it, in order (`_grid_nodes`, one compiled call; then `simpson_lengths`):
+Building it, in order (`_grid_nodes`, compiled steps; then `simpson_lengths`):
 1. Samples: per span, a node count from a 16-chord length estimate, evenly spaced in u; at a
    knot, the higher of kappa's two one-sided values.
 2. Curvature maxima: local maxima of kappa on the samples that stand out from their valleys,
@@ -108,15 +108,12 @@ class Grid:
         return float(self.s_mm[-1])
 
 
-@jit
 def polygon_length(points):
-    """Length of the control polygon (N, 3): the curve is no longer."""
-    total = 0.0
-    for i in range(points.shape[0] - 1):
-        total += math.sqrt((points[i + 1, 0] - points[i, 0]) ** 2
-                           + (points[i + 1, 1] - points[i, 1]) ** 2
-                           + (points[i + 1, 2] - points[i, 2]) ** 2)
-    return total
+    """Length of the control polygon (N, 3): the curve is no longer. The legs are summed in
+    order (np.cumsum; np.sum pairs them): the grid's tolerances derive from the last bits."""
+    leg = np.diff(points, axis=0)
+    lengths = np.sqrt(leg[:, 0] ** 2 + leg[:, 1] ** 2 + leg[:, 2] ** 2)
+    return float(np.cumsum(lengths)[-1]) if lengths.size else 0.0
 
 
 @jit
@@ -124,13 +121,15 @@ def _samples(knots, coef, degree, breaks, spacing_mm):
     """Step 1: nodes evenly spaced in u per span, at most spacing_mm apart (the span's length
     estimated by CHORD_PROBES chords, plus 5 %), at least MIN_NODES_PER_SPAN; the last break
     closes the list. Returns u, kappa, |C'| at the nodes (M,), C and the unit tangent there
-    (M, 3; the tangent from the span after a knot, 0 where C' = 0). At an interior
+    (M, 3; the tangent from the span after a knot, 0 where C' = 0), and the mean of |C'| over
+    the nodes (summed in order). At an interior
     knot kappa is the higher of its limits from the two sides (it jumps where the curve is
     only C1), so that no node understates the curvature around it; a side where |C'| is below
     ZERO_SPEED_REL of the other's does not count (its kappa is rounding noise)."""
     n_ctrl = coef.shape[0]
     n_spans = breaks.size - 1
     counts = np.empty(n_spans, dtype=np.int64)
+    n_nodes = 1  # the last break
     span = degree
     for i in range(n_spans):
         width = breaks[i + 1] - breaks[i]
@@ -144,7 +143,8 @@ def _samples(knots, coef, degree, breaks, spacing_mm):
             chord += math.sqrt((qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2)
             px, py, pz = qx, qy, qz
         counts[i] = max(MIN_NODES_PER_SPAN, math.ceil(1.05 * chord / spacing_mm))
-    u_nodes = np.empty(counts.sum() + 1)
+        n_nodes += counts[i]
+    u_nodes = np.empty(n_nodes)
     q = 0
     for i in range(n_spans):
         step = (breaks[i + 1] - breaks[i]) / counts[i]
@@ -172,7 +172,10 @@ def _samples(knots, coef, degree, breaks, spacing_mm):
             moves = left_speed > ZERO_SPEED_REL * speed[q] if speed[q] == speed[q] else True
             if moves and (left > kappa[q] or kappa[q] != kappa[q]):
                 kappa[q] = left
-    return u_nodes, kappa, speed, pts, tan
+    total_speed = 0.0
+    for q in range(speed.size):
+        total_speed += speed[q]
+    return u_nodes, kappa, speed, pts, tan, total_speed / speed.size
 
 
 @jit
@@ -210,10 +213,17 @@ def _prominent_maxima(kappa):
             n += 1
     keep = np.empty(n, dtype=np.int64)
     kept = 0
-    left_valley = kappa[0:cand[0]].min() if n > 0 else 0.0
+    # the valleys' minima by loops: ndarray.min would compile numba's own reduction
+    left_valley = 0.0
+    if n > 0:
+        left_valley = kappa[0]
+        for q in range(1, cand[0]):
+            left_valley = min(left_valley, kappa[q])
     for k in range(n):
         stop = cand[k + 1] if k + 1 < n else kappa.size
-        right_valley = kappa[cand[k]:stop].min()
+        right_valley = kappa[cand[k]]
+        for q in range(cand[k] + 1, stop):
+            right_valley = min(right_valley, kappa[q])
         if kappa[cand[k]] > max(left_valley, right_valley) * (1.0 + PEAK_PROMINENCE_REL):
             keep[kept] = cand[k]
             kept += 1
@@ -363,20 +373,17 @@ def _refine_peak(knots, coef, degree, low, high, kappa_floor):
         span = find_span(knots, degree, n_ctrl, piece_low, span)
 
 
-@jit
 def _corners(knots, coef, degree, breaks, floor_mm):
     """Step 3a: interior knots of multiplicity >= degree where the unit tangent jumps (not
-    where the curve has no length on one side: that is an end)."""
+    where the curve has no length on one side: that is an end). Not compiled (its kernels
+    are): it looks at each knot once."""
     n_ctrl = coef.shape[0]
     eps = CORNER_PROBE_REL * (breaks[breaks.size - 1] - breaks[0])
     out = np.empty(max(breaks.size - 2, 0))
     n = 0
     for b in range(1, breaks.size - 1):
         knot = breaks[b]
-        mult = 0
-        for k in knots:
-            mult += k == knot
-        if mult < degree:
+        if np.count_nonzero(knots == knot) < degree:
             continue
         _, _, _, h_before = _chord_from(knots, coef, degree, knot, -1.0,
                                         knot - breaks[b - 1], breaks[0], floor_mm)
@@ -571,8 +578,7 @@ def _near_cusp_turn(knots, coef, degree, u0):
     return (ix * ox + iy * oy + iz * oz) / norm
 
 
-@jit
-def _stops(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed, floor_mm,
+def _stops(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed, mean_speed, floor_mm,
            kappa_floor):
     """Step 3: the interior points where C' vanishes and the motion must come to rest.
 
@@ -589,24 +595,19 @@ def _stops(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed, floo
     minimum above zero_speed is a near cusp: where the path turns back across it
     (`_near_cusp_turn`) it is a stop too, a hairpin passed at rest; the others are returned as
     (R,) parameters, where kappa may peak in a needle far narrower than the samples
-    (`_near_cusp_peaks`). Returns (Q,) parameters and cosines, and the (R,) near cusps.
+    (`_near_cusp_peaks`). Returns (Q,) parameters (sorted) and cosines, and the (R,) near
+    cusps.
+
+    The search over the samples (`_stop_candidates`) is compiled; the refinement and the
+    classification of the few candidates it finds are not (their kernels are, the first time a
+    curve has such a candidate), nor is the sorting: numba compiles a quicksort and a binary
+    search of its own for each array type, seconds of the first run for a few values.
     """
-    n_ctrl = coef.shape[0]
-    last = u.size - 1
-    mean_speed = speed.mean()
-    found = np.empty(2 * u.size + breaks.size)
-    n = 0
-    near = np.empty(2 * u.size)
-    n_near = 0
-    for q in range(1, last):
-        if (speed[q] > speed[q - 1] or speed[q] > speed[q + 1]
-                or speed[q] > ZERO_CANDIDATE_REL * mean_speed):
-            continue
-        if speed[q] <= zero_speed:
-            if speed[q - 1] > zero_speed:  # the first sample of a run at rest
-                found[n] = u[q]
-                n += 1
-            continue
+    found_u, minima, turns = _stop_candidates(knots, coef, degree, breaks, u, speed, pts,
+                                              tangent, zero_speed, mean_speed, floor_mm)
+    found, near = list(found_u), []
+    near_speed = ZERO_CANDIDATE_REL * mean_speed
+    for q in minima:
         # from the sample and from the middle of each interval beside it: the zero may lie
         # just before a knot whose sample is taken on the span after it
         best_speed = np.inf
@@ -616,27 +617,10 @@ def _stops(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed, floo
             if here_speed < best_speed:
                 at, best_speed = here, here_speed
         if best_speed <= zero_speed:
-            found[n] = at
-            n += 1
-        elif best_speed <= ZERO_CANDIDATE_REL * mean_speed:
-            near[n_near] = at
-            n_near += 1
-    # a cusp or reversal between two samples need not show as a minimum of |C'| on them (|C'|
-    # may fall on through it); the tangent turning back by more than 90 degrees does, and so
-    # does a chord going back along the first sample's tangent (by more than floor_mm, beyond
-    # rounding): C'.t must change sign inside. A reversal just before a corner knot,
-    # whose sample takes the tangent after the knot, leaves both tangents pointing back while
-    # the curve between them went forward
-    for q in range(last):
-        turn = (tangent[q, 0] * tangent[q + 1, 0] + tangent[q, 1] * tangent[q + 1, 1]
-                + tangent[q, 2] * tangent[q + 1, 2])
-        cx = pts[q + 1, 0] - pts[q, 0]
-        cy = pts[q + 1, 1] - pts[q, 1]
-        cz = pts[q + 1, 2] - pts[q, 2]
-        ahead = tangent[q, 0] * cx + tangent[q, 1] * cy + tangent[q, 2] * cz
-        if speed[q] <= zero_speed or speed[q + 1] <= zero_speed or (
-                turn >= 0.0 and ahead >= -floor_mm):
-            continue
+            found.append(at)
+        elif best_speed <= near_speed:
+            near.append(at)
+    for q in turns:
         at, at_speed = _refine_zero(knots, coef, degree, 0.5 * (u[q] + u[q + 1]), u[q],
                                     u[q + 1])
         if at_speed > zero_speed:
@@ -647,23 +631,13 @@ def _stops(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed, floo
                                tangent[q, 2], u[q], u[q + 1])
             at, at_speed = _refine_zero(knots, coef, degree, start, u[q], u[q + 1])
         if at_speed <= zero_speed:
-            found[n] = at
-            n += 1
-        elif at_speed <= ZERO_CANDIDATE_REL * mean_speed:  # not a corner's flip of the tangent
-            near[n_near] = at
-            n_near += 1
-    span = degree
-    for b in range(1, breaks.size - 1):
-        knot = breaks[b]
-        span = find_span(knots, degree, n_ctrl, knot, span)  # the span starting at the knot
-        before = find_span(knots, degree, n_ctrl, breaks[b - 1], span - 1)
-        if (_speed_on_span(knots, coef, degree, before, knot) <= zero_speed
-                or _speed_on_span(knots, coef, degree, span, knot) <= zero_speed):
-            found[n] = knot
-            n += 1
-    zeros = np.sort(found[:n])
+            found.append(at)
+        elif at_speed <= near_speed:  # not a corner's flip of the tangent
+            near.append(at)
+    zeros, near = np.sort(np.array(found, dtype=float)), np.sort(np.array(near, dtype=float))
+    n = zeros.size
+    n_near = near.size
     resolution = EPS_U * 16.0 * (breaks[breaks.size - 1] - breaks[0])
-    near = np.sort(near[:n_near])
     stop_u = np.empty(n + n_near)
     stop_cos = np.empty(n + n_near)
     m = 0
@@ -687,7 +661,7 @@ def _stops(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed, floo
         if (i > 0 and u0 - zeros[i - 1] <= resolution) or u0 <= breaks[0] or (
                 u0 >= breaks[breaks.size - 1]):
             continue
-        b = np.searchsorted(breaks, u0, side="right")  # breaks[b - 1] <= u0 < breaks[b]
+        b = int(np.searchsorted(breaks, u0, side="right"))  # breaks[b - 1] <= u0 < breaks[b]
         width_after = breaks[b] - breaks[b - 1]
         width_before = width_after
         if u0 == breaks[b - 1] and b >= 2:  # on a knot: the span before it
@@ -698,17 +672,73 @@ def _stops(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed, floo
             stop_u[m] = u0
             stop_cos[m] = cos
             m += 1
-    order = np.argsort(stop_u[:m])
+    order = np.argsort(stop_u[:m], kind="stable")
     return stop_u[:m][order], stop_cos[:m][order], bends[:n_bends]
 
 
 @jit
-def _merge(knots, coef, degree, u, kappa, speed, pts, tan, extra, zero_speed):
-    """Step 4a: the sorted union of the nodes and the extra parameters, with kappa, |C'|, C and
-    the unit tangent (a parameter that is already a node keeps the node's values; kappa NaN
-    where |C'| is 0)."""
+def _stop_candidates(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed,
+                     mean_speed, floor_mm):
+    """Step 3's search over the samples (see `_stops`): the zeros of C' it finds without
+    refining (N,: first samples of runs at rest, and knots), the samples (I,) at a local
+    minimum of |C'| that needs refining, and the intervals (J,) across which the path turns
+    back. The refinements are `_stops`' (rare: most curves have none, and their kernels then
+    never compile)."""
     n_ctrl = coef.shape[0]
-    extra = np.sort(extra)
+    last = u.size - 1
+    found = np.empty(u.size + breaks.size)
+    n = 0
+    minima = np.empty(u.size, dtype=np.int64)
+    n_minima = 0
+    turns = np.empty(u.size, dtype=np.int64)
+    n_turns = 0
+    for q in range(1, last):
+        if (speed[q] > speed[q - 1] or speed[q] > speed[q + 1]
+                or speed[q] > ZERO_CANDIDATE_REL * mean_speed):
+            continue
+        if speed[q] <= zero_speed:
+            if speed[q - 1] > zero_speed:  # the first sample of a run at rest
+                found[n] = u[q]
+                n += 1
+            continue
+        minima[n_minima] = q
+        n_minima += 1
+    # a cusp or reversal between two samples need not show as a minimum of |C'| on them (|C'|
+    # may fall on through it); the tangent turning back by more than 90 degrees does, and so
+    # does a chord going back along the first sample's tangent (by more than floor_mm, beyond
+    # rounding): C'.t must change sign inside. A reversal just before a corner knot,
+    # whose sample takes the tangent after the knot, leaves both tangents pointing back while
+    # the curve between them went forward
+    for q in range(last):
+        turn = (tangent[q, 0] * tangent[q + 1, 0] + tangent[q, 1] * tangent[q + 1, 1]
+                + tangent[q, 2] * tangent[q + 1, 2])
+        cx = pts[q + 1, 0] - pts[q, 0]
+        cy = pts[q + 1, 1] - pts[q, 1]
+        cz = pts[q + 1, 2] - pts[q, 2]
+        ahead = tangent[q, 0] * cx + tangent[q, 1] * cy + tangent[q, 2] * cz
+        if speed[q] <= zero_speed or speed[q + 1] <= zero_speed or (
+                turn >= 0.0 and ahead >= -floor_mm):
+            continue
+        turns[n_turns] = q
+        n_turns += 1
+    span = degree
+    for b in range(1, breaks.size - 1):
+        knot = breaks[b]
+        span = find_span(knots, degree, n_ctrl, knot, span)  # the span starting at the knot
+        before = find_span(knots, degree, n_ctrl, breaks[b - 1], span - 1)
+        if (_speed_on_span(knots, coef, degree, before, knot) <= zero_speed
+                or _speed_on_span(knots, coef, degree, span, knot) <= zero_speed):
+            found[n] = knot
+            n += 1
+    return found[:n], minima[:n_minima], turns[:n_turns]
+
+
+@jit
+def _merge(knots, coef, degree, u, kappa, speed, pts, tan, extra, zero_speed):
+    """Step 4a: the sorted union of the nodes and the sorted extra parameters, with kappa,
+    |C'|, C and the unit tangent (a parameter that is already a node keeps the node's values;
+    kappa NaN where |C'| is 0)."""
+    n_ctrl = coef.shape[0]
     size = u.size + extra.size
     u_out = np.empty(size)
     k_out = np.empty(size)
@@ -717,7 +747,7 @@ def _merge(knots, coef, degree, u, kappa, speed, pts, tan, extra, zero_speed):
     t_out = np.empty((size, 3))
     i = 0
     j = 0
-    n = 0
+    n = np.int64(0)  # not a literal 0: _unit_tangent(..., n) would compile for Literal[int](0) too
     span = degree
     while i < u.size or j < extra.size:
         if j >= extra.size or (i < u.size and u[i] <= extra[j]):
@@ -787,9 +817,13 @@ def _refine_where_kappa_jumps_or_turns(knots, coef, degree, u, kappa, speed, pts
     n_ctrl = coef.shape[0]
     most = REFINE_GROWTH_MAX * u.size
     # only intervals made in the last round are looked at: the others' ends are unchanged
-    fresh = np.ones(u.size, dtype=np.bool_)
+    fresh = np.empty(u.size, dtype=np.bool_)
+    for q in range(u.size):  # not np.ones or np.zeros: numba compiles its own per type
+        fresh[q] = True
     for rounds in range(TURN_REFINE_ROUNDS):
-        split = np.zeros(u.size, dtype=np.bool_)
+        split = np.empty(u.size, dtype=np.bool_)
+        for q in range(u.size):
+            split[q] = False
         n_split = 0
         for q in range(u.size - 1):
             if not fresh[q]:
@@ -839,7 +873,7 @@ def _refine_where_kappa_jumps_or_turns(knots, coef, degree, u, kappa, speed, pts
         p_new = np.empty((size, 3))
         t_new = np.empty((size, 3))
         f_new = np.empty(size, dtype=np.bool_)
-        n = 0
+        n = np.int64(0)  # not a literal 0 (see _merge)
         span = degree
         for q in range(u.size):
             u_new[n] = u[q]
@@ -902,7 +936,7 @@ def _boundary_maxima(knots, coef, degree, breaks, u, peak_u, stop_u):
     n = 0
     last = ZOOM_SAMPLES - 1
     for b in range(breaks.size):
-        at = np.searchsorted(u, breaks[b])  # the samples hold every break exactly
+        at = first_at_or_above(u, breaks[b])  # the samples hold every break exactly
         for side in (-1, 1):
             beside = at + side
             if beside < 0 or beside >= u.size:
@@ -924,10 +958,16 @@ def _boundary_maxima(knots, coef, degree, breaks, u, peak_u, stop_u):
             # the interval's points in order: its ends, ZOOM_SAMPLES - 2 inside, and the probe
             pts_u = np.empty(ZOOM_SAMPLES + 1)
             pts_k = np.empty(ZOOM_SAMPLES + 1)
+            # evenly spaced points are in order already: the probe goes in after those below
+            # it (sorting them would compile numba's quicksort)
+            i_probe = 0
             for i in range(ZOOM_SAMPLES):
                 pts_u[i] = low + (high - low) * (i / last) if i < last else high
-            pts_u[ZOOM_SAMPLES] = probe_u
-            pts_u.sort()
+                if pts_u[i] <= probe_u:
+                    i_probe = i + 1
+            for i in range(ZOOM_SAMPLES, i_probe, -1):
+                pts_u[i] = pts_u[i - 1]
+            pts_u[i_probe] = probe_u
             best = 1
             for i in range(pts_u.size):
                 if pts_u[i] == probe_u:
@@ -950,13 +990,28 @@ def _boundary_maxima(knots, coef, degree, breaks, u, peak_u, stop_u):
 
 
 @jit
-def _holds_any(sorted_u, low, high):
-    """Whether sorted_u (K,) has a value in [low, high]."""
-    q = np.searchsorted(sorted_u, low)
-    return q < sorted_u.size and sorted_u[q] <= high
+def first_at_or_above(sorted_x, x):
+    """The first index q with sorted_x[q] >= x (sorted_x.size if none): np.searchsorted's left
+    side, by bisection written out, since numba's np.searchsorted compiles its own search and
+    comparators per array type."""
+    lo = 0
+    hi = sorted_x.size
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if sorted_x[mid] < x:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
 
 
 @jit
+def _holds_any(sorted_u, low, high):
+    """Whether sorted_u (K,) has a value in [low, high]."""
+    q = first_at_or_above(sorted_u, low)
+    return q < sorted_u.size and sorted_u[q] <= high
+
+
 def _near_cusp_peaks(knots, coef, degree, u, kappa, near_u, kappa_floor):
     """Step 2c: the curvature peaks of near cusps (R,) that the samples do not show.
 
@@ -967,14 +1022,14 @@ def _near_cusp_peaks(knots, coef, degree, u, kappa, near_u, kappa_floor):
     either side of a peak of 2.4e7, which the plan then passed at 0.11 mm/s, its velocity
     reversing within one period. The peak lies beside the minimum of |C'|: each near cusp
     whose kappa reaches kappa_floor and exceeds both samples around it is refined over a few
-    needle widths about it.
+    needle widths about it. Not compiled (its kernels are): there are a few near cusps.
     """
     n_ctrl = coef.shape[0]
     out = np.empty(near_u.size)
     n = 0
     for r in range(near_u.size):
         u0 = near_u[r]
-        q = min(max(np.searchsorted(u, u0, side="right") - 1, 0), u.size - 2)
+        q = min(max(int(np.searchsorted(u, u0, side="right")) - 1, 0), u.size - 2)
         span = find_span(knots, degree, n_ctrl, u0, degree)
         c = point_d2(knots, coef, degree, span, u0)
         k0, speed0 = curvature(c[3], c[4], c[5], c[6], c[7], c[8])
@@ -991,17 +1046,18 @@ def _near_cusp_peaks(knots, coef, degree, u, kappa, near_u, kappa_floor):
     return out[:n]
 
 
-@jit
 def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, floor_mm):
     """Steps 1-4: nodes u, kappa, |C'| (M,), refined peak parameters (P,), stops (Q,) with
     the cosine of their turn (Q,), and the mean |C'| over the samples (the arc length
-    tolerance's scale)."""
-    u, kappa, speed, pts, tan = _samples(knots, coef, degree, breaks, spacing_mm)
-    mean_speed = speed.mean()
+    tolerance's scale).
+
+    The steps are compiled; this driver is not: it runs each once (and the peak refinement once
+    per peak), and its sorting, concatenating and masking of a few values is numpy's, which in
+    compiled code would cost seconds of the first run compiling numba's own quicksort and array
+    functions."""
+    u, kappa, speed, pts, tan, mean_speed = _samples(knots, coef, degree, breaks, spacing_mm)
     zero_speed = ZERO_SPEED_REL * mean_speed
-    for q in range(u.size):
-        if speed[q] <= zero_speed:
-            kappa[q] = math.nan
+    kappa[speed <= zero_speed] = math.nan
     _fill_singular(kappa)
     idx = _prominent_maxima(kappa)
     peak_u = np.empty(idx.size)
@@ -1011,10 +1067,10 @@ def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, f
         peak_u[k] = refined_u if refined_kappa > kappa[idx[k]] else u[idx[k]]
     corner_u = _corners(knots, coef, degree, breaks, floor_mm)
     zero_u, zero_cos, near_u = _stops(knots, coef, degree, breaks, u, speed, pts, tan,
-                                      zero_speed, floor_mm, kappa_floor)
+                                      zero_speed, mean_speed, floor_mm, kappa_floor)
     stop_u = np.concatenate((corner_u, zero_u))
     stop_cos = np.concatenate((np.zeros(corner_u.size), zero_cos))
-    order = np.argsort(stop_u)
+    order = np.argsort(stop_u, kind="stable")
     stop_u = stop_u[order]
     stop_cos = stop_cos[order]
     # kappa grows without bound into a cusp, so its "maximum" is the refinement's bracket end:
@@ -1024,13 +1080,11 @@ def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, f
         keep[k] = not _holds_any(stop_u, u[idx[k] - 1], u[idx[k] + 1])
     peak_u = peak_u[keep]
     needles = _near_cusp_peaks(knots, coef, degree, u, kappa, near_u, kappa_floor)
-    if needles.size:
-        peak_u = np.concatenate((peak_u, needles))
-    peak_u = np.sort(peak_u)
+    peak_u = np.sort(np.concatenate((peak_u, needles)))
     beside_u = _boundary_maxima(knots, coef, degree, breaks, u, peak_u, stop_u)
     if beside_u.size:
         peak_u = np.sort(np.concatenate((peak_u, beside_u)))
-    extra = np.concatenate((peak_u, stop_u, extra_u))
+    extra = np.sort(np.concatenate((peak_u, stop_u, extra_u)))
     u, kappa, speed, pts, tan = _merge(knots, coef, degree, u, kappa, speed, pts, tan, extra,
                                        zero_speed)
     _fill_singular(kappa)
@@ -1039,8 +1093,7 @@ def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, f
     # a spike of kappa narrower than the samples shows only in the refined grid: its maxima
     # at or above kappa_floor that no peak's bracket holds are peaks too (refined likewise)
     idx = _prominent_maxima(kappa)
-    more = np.empty(idx.size)
-    n_more = 0
+    more = []
     for k in range(idx.size):
         low, high = u[idx[k] - 1], u[idx[k] + 1]
         if kappa[idx[k]] < kappa_floor:
@@ -1048,13 +1101,13 @@ def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, f
         if _holds_any(peak_u, low, high) or _holds_any(stop_u, low, high):
             continue
         refined_u, refined_kappa = _refine_peak(knots, coef, degree, low, high, kappa_floor)
-        more[n_more] = refined_u if refined_kappa > kappa[idx[k]] else u[idx[k]]
-        n_more += 1
-    if n_more:
+        more.append(refined_u if refined_kappa > kappa[idx[k]] else u[idx[k]])
+    if more:
+        added = np.sort(np.array(more))
         u, kappa, speed, pts, tan = _merge(knots, coef, degree, u, kappa, speed, pts, tan,
-                                           more[:n_more], zero_speed)
+                                           added, zero_speed)
         _fill_singular(kappa)
-        peak_u = np.sort(np.concatenate((peak_u, more[:n_more])))
+        peak_u = np.sort(np.concatenate((peak_u, added)))
     return u, kappa, speed, peak_u, stop_u, stop_cos, mean_speed
 
 

@@ -41,7 +41,13 @@ import numpy as np
 from nurbsfeed.errors import CurveError
 from nurbsfeed.geometry.nurbs import NurbsCurve, curvature_from_derivatives
 from nurbsfeed.jit import jit
-from nurbsfeed.planning.grid import ZERO_SPEED_REL, Grid, build_grid, polygon_length
+from nurbsfeed.planning.grid import (
+    ZERO_SPEED_REL,
+    Grid,
+    build_grid,
+    first_at_or_above,
+    polygon_length,
+)
 from nurbsfeed.planning.limits import Limits, curvature_threshold, speed_limit
 from nurbsfeed.planning.path_model import (
     frames,
@@ -165,7 +171,11 @@ def _key_points(kappa, raw_limit, fcap, stop_index, stop_cos, peak_index, feed_n
     """
     size = kappa.size
     last = size - 1
-    kind = np.full(size, -1, dtype=np.int64)
+    # loops rather than np.full, np.flatnonzero, index arrays and np.searchsorted: each of
+    # those compiles numba's own implementation, together a second of the first run
+    kind = np.empty(size, dtype=np.int64)
+    for n in range(size):
+        kind[n] = -1
     kind[0] = KIND_END
     kind[last] = KIND_END
     for n in feed_nodes:
@@ -199,16 +209,31 @@ def _key_points(kappa, raw_limit, fcap, stop_index, stop_cos, peak_index, feed_n
             limit[n] = min(limit[n], borrowed[n + 1])
         if kind[n] == KIND_CORNER or kind[n] == KIND_CUSP:
             limit[n] = 0.0
-    key_node = np.flatnonzero(kind >= 0)
-    key_kind = kind[key_node]
-    nominal = limit[key_node]
+    n_keys = 0
+    for n in range(size):
+        if kind[n] >= 0:
+            n_keys += 1
+    key_node = np.empty(n_keys, dtype=np.int64)
+    key_kind = np.empty(n_keys, dtype=np.int64)
+    nominal = np.empty(n_keys)
+    keys_before = np.empty(size, dtype=np.int64)  # per node, the key nodes below it
+    k = 0
+    for n in range(size):
+        keys_before[n] = k
+        if kind[n] >= 0:
+            key_node[k] = n
+            key_kind[k] = kind[n]
+            nominal[k] = limit[n]
+            k += 1
     for k in range(key_node.size):
         if key_kind[k] == KIND_END or key_kind[k] == KIND_CORNER or key_kind[k] == KIND_CUSP:
             nominal[k] = 0.0
     for n in feed_nodes:
-        k = np.searchsorted(key_node, n)
+        k = keys_before[n] if n < size else n_keys
         nominal[k] = min(nominal[k], fcap[max(n - 1, 0)], fcap[n])
-    cap = np.full(key_node.size - 1, feed_cap)
+    cap = np.empty(key_node.size - 1)
+    for k in range(cap.size):
+        cap[k] = feed_cap
     seg = 0
     for n in range(size):
         if seg + 1 < cap.size and n >= key_node[seg + 1]:
@@ -268,18 +293,33 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
     long stretch of a steep limit: a near cusp); and, per segment, the stretch [from, to] of arc
     length where its peak speed hides between two nodes ((K-1, 2); NaN: none).
     """
-    key_s = s_mm[key_node]
-    length = key_s[1:] - key_s[:-1]
-    n_seg = length.size
+    # loops rather than index arrays and array expressions, here and below: numba compiles
+    # each of those into code of its own, a second of the first run for this kernel alone
+    n_seg = key_node.size - 1
+    key_s = np.empty(n_seg + 1)
+    for k in range(n_seg + 1):
+        key_s[k] = s_mm[key_node[k]]
+    length = np.empty(n_seg)
+    free = np.empty(n_seg)
+    for seg in range(n_seg):
+        length[seg] = key_s[seg + 1] - key_s[seg]
     # a segment's profile (hence v at its nodes) depends on its end speeds, peak and holds only:
     # what they were when its nodes were last checked (NaN: never)
-    seen = np.full((n_seg, 5), np.nan)
+    seen = np.empty((n_seg, 5))
     v_nodes = np.zeros(s_mm.size)
     checked = np.empty(s_mm.size, dtype=np.int64)
-    shoulder_at = np.full(n_seg, -1, dtype=np.int64)
+    checked_s = np.empty(s_mm.size)
+    checked_limit = np.empty(s_mm.size)
+    shoulder_at = np.empty(n_seg, dtype=np.int64)
+    for seg in range(n_seg):  # loops, not np.full: numba compiles its own per type
+        shoulder_at[seg] = -1
+        for k in range(5):
+            seen[seg, k] = np.nan
     rounds = 0
     while True:
-        free = np.maximum(length - hold_start - hold_end, 0.0)
+        for seg in range(n_seg):
+            gap = length[seg] - hold_start[seg] - hold_end[seg]
+            free[seg] = 0.0 if gap < 0.0 else gap  # np.maximum's: NaN and -0.0 stay
         v = scan_speeds(nominal, free, cap, acc, jerk)
         peak, d_up, d_down = segment_profiles(v, free, cap, acc, jerk)
         t0, s0, v0, a0, jk, key_t, duration = chain_segments(key_s, v, peak, hold_start,
@@ -298,12 +338,17 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
                 seen[seg, k] = profile[k]
             for node in range(key_node[seg] + 1, key_node[seg + 1]):
                 checked[n_checked] = node
+                checked_s[n_checked] = s_mm[node]
+                checked_limit[n_checked] = limit[node]
                 n_checked += 1
         if t0.size and n_checked:
-            nodes = checked[:n_checked]
             checked_v = np.empty(n_checked)
-            speed_at_arc(t0, s0, v0, a0, jk, duration, s_mm[nodes], limit[nodes], checked_v)
-            v_nodes[nodes] = checked_v
+            speed_at_arc(t0, s0, v0, a0, jk, duration, checked_s[:n_checked],
+                         checked_limit[:n_checked], checked_v)
+            # element by element: an assignment through an index array compiles numba's
+            # shape-mismatch message (str, repr, concatenation), a second of the first run
+            for i in range(n_checked):
+                v_nodes[checked[i]] = checked_v[i]
         if rounds == MAX_FIX_ROUNDS:
             break
         changed = False
@@ -409,7 +454,7 @@ def _hidden_peak(seg, s_mm, limit, key_node, key_s, v, peak, hold_start, hold_en
         return math.nan, math.nan
     accel_end = key_s[seg] + hold_start[seg] + d_up[seg]
     decel_start = max(key_s[seg + 1] - hold_end[seg] - d_down[seg], accel_end)
-    after = np.searchsorted(s_mm, accel_end, side="left")  # the first node at or after it
+    after = first_at_or_above(s_mm, accel_end)  # the first node at or after it
     if after < s_mm.size and s_mm[after] <= decel_start:
         return math.nan, math.nan  # a node in the cruise: checked
     if (after <= key_node[seg] or after > key_node[seg + 1]
@@ -481,8 +526,10 @@ def _plan_on_grid(grid: Grid, raw_limit, fcap, feed_nodes, kappa0: float, lim: L
             feed_nodes, kappa0, lim.feed_mm_s, shoulders)
         hold_start = np.zeros(len(key_node) - 1)
         hold_end = np.zeros(len(key_node) - 1)
+        # a writable copy of the arc lengths: the grid's search kernel (first_at_or_above) is
+        # compiled for writable arrays, and a read-only one would compile it a second time
         v, peak, *pieces, key_t, duration, v_nodes, rounds, shoulder_at, hidden_peak_s = \
-            _limit_rounds(grid.s_mm, limit, key_node, nominal, cap, hold_start, hold_end,
+            _limit_rounds(grid.s_mm.copy(), limit, key_node, nominal, cap, hold_start, hold_end,
                           acc, jerk, HOLD_MAX_PERIODS * lim.period_s, lim.jerk_model == "path")
         if not (shoulder_at >= 0).any():  # (the common case: setdiff1d costs ~50 us)
             break
@@ -771,10 +818,7 @@ def _optimal_plan(base: Plan, feed_u: np.ndarray, feed_mm_s: np.ndarray,
     rest_keys = base.piece_key
     rest_nodes = base.key_node[rest_keys]
     # the base law's speed at the nodes, as it runs (each stretch slowed by its lambda)
-    v_nodes = np.empty(grid.u.size)
-    speed_at_arc(law.t0_s, law.s0_mm, law.v0_mm_s, law.a0_mm_s2, law.jerk_mm_s3,
-                 law.duration_s, np.ascontiguousarray(grid.s_mm), np.full(grid.u.size, -np.inf),
-                 v_nodes)
+    v_nodes = law.speed_at(grid.s_mm)
     v_nodes /= float(base.piece_scale.max(initial=1.0))
     if lim.planner == "envelope":
         from nurbsfeed.planning.envelope import envelope_schedule

@@ -53,12 +53,19 @@ def chain_segments(s_key, v_key, v_peak, hold_start, hold_end, acc, jerk):
             jerks[n] = 0.0
             n += 1
         m = transition_phases(va, vp, acc, jerk, durations[n:], jerks[n:])
-        d_up = 0.5 * (va + vp) * durations[n:n + m].sum()
+        # durations summed by loops: ndarray.sum would compile numba's own reduction
+        t_up = 0.0
+        for q in range(n, n + m):
+            t_up += durations[q]
+        d_up = 0.5 * (va + vp) * t_up
         n += m
         n_cruise = n
         n += 1
         m = transition_phases(vp, vb, acc, jerk, durations[n:], jerks[n:])
-        d_down = 0.5 * (vp + vb) * durations[n:n + m].sum()
+        t_down = 0.0
+        for q in range(n, n + m):
+            t_down += durations[q]
+        d_down = 0.5 * (vp + vb) * t_down
         n += m
         if hold_end[i] > 0.0 and vb > 0.0:
             durations[n] = hold_end[i] / vb
@@ -128,7 +135,9 @@ def speed_at_arc(t0, s0, v0, a0, jk, duration, s_query, floor, out):
       is the previous query's tau in the same piece, moved on by ds / v.
     """
     n = t0.size
-    i = 0
+    # not a literal 0: numba would compile _last_at_or_below for Literal[int](0) as well, while
+    # it types the loop, and never run that version
+    i = np.int64(0)
     tau = 0.0
     for q in range(s_query.size):
         s = s_query[q]
@@ -190,7 +199,7 @@ def evaluate(t0, s0, v0, a0, jk, t, piece, local, v, a, j):
     Increasing times are fastest: the piece is found by a pointer that moves forward, by binary
     search otherwise.
     """
-    i = 0
+    i = np.int64(0)  # not a literal 0 (see speed_at_arc)
     for q in range(t.size):
         tq = t[q]
         i = _last_at_or_below(t0, tq, i)
@@ -223,6 +232,18 @@ class TimeLaw:
         for arr in arrays:
             arr.setflags(write=False)
         return cls(*arrays, duration_s=float(duration_s))
+
+    def speed_at(self, s_mm: np.ndarray) -> np.ndarray:
+        """v where the law passes each arc length s_mm (M,) -> (M,) (see `speed_at_arc`).
+
+        The pieces go in as writable copies: the planner's compiled loop passes writable ones,
+        and a read-only array is another type to numba, a second compilation of the kernel."""
+        s_query = np.array(s_mm, dtype=float)
+        out = np.empty(s_query.size)
+        speed_at_arc(self.t0_s.copy(), self.s0_mm.copy(), self.v0_mm_s.copy(),
+                     self.a0_mm_s2.copy(), self.jerk_mm_s3.copy(), self.duration_s, s_query,
+                     np.full(s_query.size, -np.inf), out)
+        return out
 
     def sample(self, t_s: np.ndarray) -> tuple[np.ndarray, ...]:
         """At times (N,) (increasing is fastest): piece index, arc length within the piece

@@ -5,7 +5,8 @@
 
 Runs `nurbsfeed convert` in a new process with an empty numba cache (NUMBA_CACHE_DIR in a
 temporary directory, so the in-tree cache is left alone), then again with the cache it filled,
-and prints both wall times, every kernel the first run compiled with its compile time (its own,
+and prints the wall and CPU time of both and the load before them (on a shared machine the CPU
+time is the steadier), every kernel the first run compiled with its compile time (its own,
 callees excluded, from numba's event API) and any kernel compiled for more than one signature.
 nurbsfeed.jit.FIRST_COMPILE_S, which the compile notice quotes, comes from this measurement.
 """
@@ -15,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -57,14 +59,22 @@ print(json.dumps({"own_s": own, "signatures": signatures}))
 """
 
 
-def convert(args: list[str], cache: str) -> tuple[float, dict[str, object]]:
-    """Wall time of a conversion in a new process, and what the probe saw."""
+def _children_cpu_s() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def convert(args: list[str], cache: str) -> tuple[float, float, dict[str, object]]:
+    """Wall and CPU time of a conversion in a new process, and what the probe saw. The CPU time
+    is the steadier of the two on a shared machine (another process's load stretches the wall
+    time, not this one's CPU time, on a machine with a core to spare)."""
     env = dict(os.environ, NUMBA_CACHE_DIR=cache)
     env.pop("NURBSFEED_NO_JIT", None)
-    start = time.perf_counter()
+    start, start_cpu = time.perf_counter(), _children_cpu_s()
     done = subprocess.run([sys.executable, "-c", PROBE, "convert", *args, "-q"], env=env,
                           capture_output=True, text=True, check=True)
-    return time.perf_counter() - start, json.loads(done.stdout.splitlines()[-1])
+    return (time.perf_counter() - start, _children_cpu_s() - start_cpu,
+            json.loads(done.stdout.splitlines()[-1]))
 
 
 def main() -> None:
@@ -76,12 +86,14 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         args = [options.input, "-m", options.machine, "-o", str(Path(tmp) / "out.nc")]
         cache = str(Path(tmp) / "numba-cache")
-        cold_s, cold = convert(args, cache)
-        warm_s, warm = convert(args, cache)
+        load = os.getloadavg()[0]
+        cold_s, cold_cpu_s, cold = convert(args, cache)
+        warm_s, warm_cpu_s, _ = convert(args, cache)
     own: dict[str, float] = cold["own_s"]  # type: ignore[assignment]
     ours = {name: t for name, t in own.items() if name.startswith("nurbsfeed.")}
-    print(f"first run (empty cache): {cold_s:6.1f} s wall")
-    print(f"second run (cache)     : {warm_s:6.1f} s wall")
+    print(f"first run (empty cache): {cold_s:6.1f} s wall, {cold_cpu_s:5.1f} s CPU")
+    print(f"second run (cache)     : {warm_s:6.1f} s wall, {warm_cpu_s:5.1f} s CPU")
+    print(f"load before the runs   : {load:.2f} (1-minute average, {os.cpu_count()} cores)")
     print(f"compiling: {sum(own.values()):.1f} s, {len(ours)} nurbsfeed kernels "
           f"{sum(ours.values()):.1f} s, numba's own implementations (numpy functions...) "
           f"{sum(own.values()) - sum(ours.values()):.1f} s")
