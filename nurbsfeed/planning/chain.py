@@ -1,0 +1,221 @@
+"""Chains: consecutive joined curves merged into one NURBS curve, planned as one path (design §3b).
+
+A chain of curves C_0 .. C_{N-1} of one degree p, each starting where the last ended, is the
+single curve whose knot vector puts the pieces one after the other, the knot of each joint
+repeated p times (`merge_curves`):
+
+    knots   = K_0[:-1] ++ (K_1[p+1:] shifted) ++ ... (each piece's range laid after the last)
+    points  = P_0 ++ P_1[1:] ++ ...          (a joint's control point is shared)
+    weights = w_0 ++ c_1 w_1[1:] ++ ...      (c_i makes the shared weight agree)
+
+With multiplicity p at a joint the curve passes through the shared control point there, and the
+spans on either side use only their own piece's control points with its own clamped basis: the
+merged curve is each piece exactly (a rational curve does not change when all its weights are
+multiplied by one constant, so rescaling a piece's weights to agree at the joint keeps it). The
+curve is C0 at a joint, and whatever the pieces make of it: a knot of multiplicity >= degree
+where the tangent jumps is a corner the planner rests at (planning.grid), a curvature jump is
+capped by the path model's jerk rule (path_model.jump_speeds), and a piece's programmed feed is
+a step of the merged feed at its range. What the planner does not see is a turn below its
+corner tolerance (1.4e-4 rad): `joint_caps` turns it into a feed step around the joint.
+
+Each piece gets a share of the parameter range proportional to its control polygon's length, so
+that |C'| stays of one size along the chain (the stepping's first guess of du/ds is good).
+Pieces of another degree, or whose weights would break the input envelope, end a chain
+(`can_follow`): degree elevation is not done.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from nurbsfeed.geometry.nurbs import MAX_WEIGHT_RATIO, NurbsCurve
+from nurbsfeed.planning.limits import Limits
+from nurbsfeed.planning.path_model import jump_speeds, kappa_n_jumps
+
+# a piece's share of the chain's parameter range is at least this share of the mean: a piece of
+# almost no length still gets spans the knot check accepts
+MIN_RANGE_SHARE = 1e-6
+# half-width of the feed step that caps a near-tangent joint, as a share of the chain's
+# parameter range: the planner adds a node at each step, so the cap holds at the joint itself
+JOINT_CAP_HALF_WIDTH = 1e-9
+
+
+@dataclass(frozen=True, eq=False)
+class Chain:
+    """Curves merged into one (`merge_curves`): the merged curve, and per piece (N,) its start
+    in the merged parameter (u_start[0] = 0) and its own curve; joint_u (N-1,) = u_start[1:]."""
+
+    curve: NurbsCurve
+    pieces: tuple[NurbsCurve, ...]
+    u_start: np.ndarray  # (N,)
+    u_range: np.ndarray  # (N,) share of [0, 1] each piece occupies
+
+    @property
+    def joint_u(self) -> np.ndarray:
+        return self.u_start[1:]
+
+    def piece_of(self, u: np.ndarray) -> np.ndarray:
+        """The piece (M,) each merged parameter u (M,) lies in; a joint belongs to the piece it
+        ends."""
+        return np.searchsorted(self.joint_u, u, side="left")
+
+    def piece_u(self, u: np.ndarray, piece: np.ndarray) -> np.ndarray:
+        """Merged u (M,) -> each piece's own stored u (M,) (its knots in [0, 1])."""
+        local = (u - self.u_start[piece]) / self.u_range[piece]
+        return np.clip(local, 0.0, 1.0)
+
+    def merged_u(self, piece: int, u: np.ndarray) -> np.ndarray:
+        """A piece's own stored u (M,) -> merged u (M,)."""
+        return self.u_start[piece] + np.asarray(u, dtype=float) * self.u_range[piece]
+
+
+def chain_weights(curve: NurbsCurve) -> tuple[float, float, float]:
+    """A chain of one curve's weights: (lowest, highest, last), the state `can_follow` takes."""
+    return float(curve.weights.min()), float(curve.weights.max()), float(curve.weights[-1])
+
+
+def can_follow(last: NurbsCurve, nxt: NurbsCurve, weights: tuple[float, float, float]
+               ) -> tuple[float, float, float] | None:
+    """Whether `nxt` may be merged after `last`, the chain's last piece, given the chain's
+    weights so far (lowest, highest, last, as the merged curve holds them): the chain's weights
+    with `nxt` merged, or None when a degree differs, a piece has no length (it is written as
+    such, alone) or the merged weights would spread beyond MAX_WEIGHT_RATIO."""
+    if nxt.degree != last.degree or nxt.is_degenerate or last.is_degenerate:
+        return None
+    factor = weights[2] / float(nxt.weights[0])
+    lo = min(weights[0], float(nxt.weights.min()) * factor)
+    hi = max(weights[1], float(nxt.weights.max()) * factor)
+    if hi / lo > MAX_WEIGHT_RATIO:
+        return None
+    return lo, hi, float(nxt.weights[-1]) * factor
+
+
+def merge_curves(curves: list[NurbsCurve], name: str = "") -> Chain:
+    """The chain of `curves` (module docstring), each starting at the last one's end; the
+    shared control point of a joint is the end of the piece before it.
+
+    curves: N >= 1 curves of one degree (`can_follow`). The merged curve is built unchecked
+    (each piece was checked when read; a span of the merged curve is a span of a piece, scaled).
+    """
+    p = curves[0].degree
+    lengths = np.array([float(np.sum(np.linalg.norm(np.diff(c.points, axis=0), axis=1)))
+                        for c in curves])
+    mean = float(lengths.mean()) if lengths.size else 0.0
+    ranges = np.maximum(lengths, MIN_RANGE_SHARE * mean) if mean > 0.0 else np.ones(len(curves))
+    ranges = ranges / ranges.sum()
+    starts = np.concatenate(([0.0], np.cumsum(ranges)[:-1]))
+    knots = [curves[0].knots[:-1] * ranges[0]]
+    points = [curves[0].points]
+    weights = [curves[0].weights]
+    for i in range(1, len(curves)):
+        c = curves[i]
+        tail = c.knots[p + 1:] * ranges[i] + starts[i]
+        knots.append(tail if i == len(curves) - 1 else tail[:-1])
+        points.append(c.points[1:])
+        weights.append(c.weights[1:] * (weights[-1][-1] / c.weights[0]))
+    all_knots = np.concatenate(knots)
+    if len(curves) == 1:
+        all_knots = curves[0].knots.copy()
+    all_knots[-p - 1:] = 1.0  # exactly 1, whatever the sum of the shares rounded to
+    all_weights = np.concatenate(weights)
+    # the largest weight in [1, 2), as NurbsCurve.build keeps it (a power of two: exact)
+    all_weights = all_weights * 2.0 ** -np.floor(np.log2(all_weights.max()))
+    all_points = np.concatenate(points)
+    for arr in (all_knots, all_weights, all_points):
+        arr.setflags(write=False)
+    merged = NurbsCurve(p, all_knots, all_points, all_weights, name or curves[0].name)
+    u_start = starts.copy()
+    u_start[0] = 0.0
+    # a joint's parameter is the merged curve's knot there, exactly
+    index = len(curves[0].knots) - 1 - p
+    for i in range(1, len(curves)):
+        u_start[i] = all_knots[index]
+        index += len(curves[i].knots) - p - 2
+    ranges = np.diff(np.concatenate((u_start, [1.0])))
+    for arr in (u_start, ranges):
+        arr.setflags(write=False)
+    return Chain(merged, tuple(curves), u_start, ranges)
+
+
+@dataclass(frozen=True)
+class Joints:
+    """The joints of a chain, (J,) each: the turn of the unit tangent (rad), the jump of the
+    curvature vector kappa N (1/mm), and the highest speed the period rule allows there
+    (mm/s; inf: no cap, 0: a corner, at rest)."""
+
+    u: np.ndarray
+    turn_rad: np.ndarray
+    kappa_jump_1_mm: np.ndarray
+    cap_mm_s: np.ndarray
+
+
+# a turn above this is a corner to the planner (planning.grid: CORNER_COS_TOL = 1e-8 of the
+# cosine), and the motion rests there
+CORNER_TURN_RAD = float(np.sqrt(2e-8))
+
+
+def joints(chain: Chain, lim: Limits) -> Joints:
+    """Turn, curvature jump and speed cap at each joint of the chain (design §3b).
+
+    A turn of the unit tangent by |t+ - t-| is a velocity jump v |t+ - t-| per period: per axis
+    x it acts as acceleration v |dt_x| / T and as jerk v |dt_x| / T^2, so the joint passes at
+    v <= min_x(A_x T, J_x T^2) / |dt_x| (the tangential limits on |dt| likewise). Above the
+    planner's corner tolerance the motion rests (cap 0). A curvature jump D acts as jerk v^2 |D|
+    / T (path_model.jump_speeds, the rule the planner applies at every knot)."""
+    u = chain.joint_u
+    if u.size == 0:
+        empty = np.empty(0)
+        return Joints(u, empty, empty, empty)
+    curve = chain.curve
+    left_u = np.nextafter(u, -np.inf)
+    _, d_left, _ = curve.derivatives(left_u)
+    _, d_right, _ = curve.derivatives(u)
+    t_left = d_left / np.linalg.norm(d_left, axis=1)[:, None]
+    t_right = d_right / np.linalg.norm(d_right, axis=1)[:, None]
+    dt = t_right - t_left
+    turn = 2.0 * np.arcsin(np.clip(np.linalg.norm(dt, axis=1) / 2.0, 0.0, 1.0))
+    t = lim.period_s
+    with np.errstate(divide="ignore"):
+        size = np.linalg.norm(dt, axis=1)
+        cap = np.where(size > 0.0, min(lim.acc_mm_s2 * t, lim.jerk_mm_s3 * t * t)
+                       / np.where(size > 0.0, size, 1.0), np.inf)
+        for x in range(3):
+            d = np.abs(dt[:, x])
+            axis = min(lim.axis_acc_mm_s2[x] * t, lim.axis_jerk_mm_s3[x] * t * t)
+            cap = np.minimum(cap, np.where(d > 0.0, axis / np.where(d > 0.0, d, 1.0), np.inf))
+    jump = kappa_n_jumps(curve, u)
+    cap = np.minimum(cap, jump_speeds(jump, lim))
+    cap = np.where(turn > CORNER_TURN_RAD, 0.0, np.where(cap >= lim.feed_mm_s, np.inf, cap))
+    return Joints(u, turn, np.linalg.norm(jump, axis=1), cap)
+
+
+def joint_feed(chain: Chain, caps_mm_s: np.ndarray, feed_u: np.ndarray, feed_mm_s: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """The chain's programmed feed (a step function: breaks feed_u (F,), feeds feed_mm_s (F,),
+    inf before the first break) with a step down to caps_mm_s (J,) around each joint whose cap
+    is finite and above 0 (a rest is the planner's own): the joint turns by less than the
+    planner sees but more than the period rule lets pass at full speed."""
+    capped = np.flatnonzero(np.isfinite(caps_mm_s) & (caps_mm_s > 0.0))
+    if capped.size == 0:
+        return feed_u, feed_mm_s
+    u_breaks = list(feed_u)
+    feeds = list(feed_mm_s)
+
+    def feed_at(u: float) -> float:
+        i = int(np.searchsorted(np.asarray(u_breaks), u, side="right")) - 1
+        return feeds[i] if i >= 0 else np.inf
+
+    for j in capped:
+        u = float(chain.joint_u[j])
+        lo, hi = u - JOINT_CAP_HALF_WIDTH, u + JOINT_CAP_HALF_WIDTH
+        after = feed_at(hi)
+        inside = min(feed_at(lo), after, float(caps_mm_s[j]))
+        keep = [k for k, b in enumerate(u_breaks) if not lo <= b <= hi]
+        u_breaks = [u_breaks[k] for k in keep] + [lo, hi]
+        feeds = [feeds[k] for k in keep] + [inside, after]
+        order = np.argsort(u_breaks, kind="stable")
+        u_breaks = [u_breaks[k] for k in order]
+        feeds = [feeds[k] for k in order]
+    return np.array(u_breaks), np.array(feeds)
