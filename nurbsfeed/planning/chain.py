@@ -99,6 +99,12 @@ def merge_curves(curves: list[NurbsCurve], name: str = "") -> Chain:
     curves: N >= 1 curves of one degree (`can_follow`). The merged curve is built unchecked
     (each piece was checked when read; a span of the merged curve is a span of a piece, scaled).
     """
+    if len(curves) == 1:  # the curve itself, its input parameter kept
+        one = np.array([0.0])
+        whole = np.array([1.0])
+        for arr in (one, whole):
+            arr.setflags(write=False)
+        return Chain(curves[0], (curves[0],), one, whole)
     p = curves[0].degree
     lengths = np.array([float(np.sum(np.linalg.norm(np.diff(c.points, axis=0), axis=1)))
                         for c in curves])
@@ -116,8 +122,6 @@ def merge_curves(curves: list[NurbsCurve], name: str = "") -> Chain:
         points.append(c.points[1:])
         weights.append(c.weights[1:] * (weights[-1][-1] / c.weights[0]))
     all_knots = np.concatenate(knots)
-    if len(curves) == 1:
-        all_knots = curves[0].knots.copy()
     all_knots[-p - 1:] = 1.0  # exactly 1, whatever the sum of the shares rounded to
     all_weights = np.concatenate(weights)
     # the largest weight in [1, 2), as NurbsCurve.build keeps it (a power of two: exact)
@@ -137,6 +141,24 @@ def merge_curves(curves: list[NurbsCurve], name: str = "") -> Chain:
     for arr in (u_start, ranges):
         arr.setflags(write=False)
     return Chain(merged, tuple(curves), u_start, ranges)
+
+
+def chain_feed(chain: Chain, feeds: list[tuple[np.ndarray, np.ndarray]]
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """The pieces' programmed feeds (feed_u, feed_mm_s) in their own u, as one step function of
+    the merged u (CurveBlock.feed_u's form; empty arrays when no piece has one)."""
+    u_breaks: list[float] = []
+    values: list[float] = []
+    for i, (feed_u, feed_mm_s) in enumerate(feeds):
+        if feed_u.size == 0 or feed_u[0] > chain.pieces[i].u_min:
+            u_breaks.append(float(chain.u_start[i]))
+            values.append(np.inf)
+        u_breaks.extend(chain.merged_u(i, feed_u).tolist())
+        values.extend(feed_mm_s.tolist())
+    if all(v == np.inf for v in values):
+        return np.empty(0), np.empty(0)
+    keep = [k for k in range(len(values)) if k == 0 or values[k] != values[k - 1]]
+    return np.array([u_breaks[k] for k in keep]), np.array([values[k] for k in keep])
 
 
 @dataclass(frozen=True)
