@@ -31,8 +31,8 @@ class PassThrough:
     """
 
     text: str
-    joins: bool = False
-    words: bool = False
+    joins: bool = field(default=False, compare=False)  # (the line is its text: equal texts are
+    words: bool = field(default=False, compare=False)  # equal items)
 
 
 @dataclass(frozen=True, eq=False)

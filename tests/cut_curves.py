@@ -68,10 +68,14 @@ def interior_knots(knots: np.ndarray, degree: int) -> np.ndarray:
 
 
 def cuts_for(knots: np.ndarray, degree: int, n_pieces: int) -> list[float]:
-    """n_pieces - 1 interior knots spread evenly over the curve's distinct interior knots."""
+    """n_pieces - 1 interior knots spread evenly over the curve's distinct interior knots; on
+    a curve with fewer, parameters spread evenly over its range (a cut by knot insertion is
+    exact anywhere)."""
     inner = interior_knots(knots, degree)
-    pick = np.linspace(0, inner.size - 1, n_pieces + 1)[1:-1]
-    return [float(inner[int(round(i))]) for i in pick]
+    if inner.size < n_pieces - 1:
+        return np.linspace(knots[0], knots[-1], n_pieces + 1)[1:-1].tolist()
+    pick = np.rint(np.linspace(0, inner.size - 1, n_pieces - 1)).astype(int)
+    return [float(u) for u in inner[pick]]
 
 
 def _num(value: float, decimals: int = 9) -> str:
@@ -80,15 +84,15 @@ def _num(value: float, decimals: int = 9) -> str:
 
 
 def gcode_chain(pieces: list[Piece], feed: float, dialect: str = "fanuc",
-                between: list[str] | None = None, decimals: int = 9) -> str:
+                between: list[list[str]] | None = None, decimals: int = 9) -> str:
     """A program: a G0 to the first piece's start, then the pieces as G06.2 (Fanuc) or G6.2
-    (LinuxCNC) blocks one after the other, with the lines `between` (each without its ending)
-    written between consecutive pieces."""
+    (LinuxCNC) blocks one after the other, with the lines between[j] (each without its ending)
+    written between piece j and piece j + 1."""
     lines = ["G21 G90 G17 G94", "G0 X{} Y{} Z{}".format(*(_num(c, decimals)
                                                          for c in pieces[0].points[0]))]
     for i, piece in enumerate(pieces):
         if i and between:
-            lines.extend(between)
+            lines.extend(between[i - 1])
         for j, (k, p, w) in enumerate(zip(piece.knots, piece.points, piece.weights)):
             xyz = " ".join(f"{axis}{_num(c, decimals)}" for axis, c in zip("XYZ", p))
             if j == 0:

@@ -37,6 +37,11 @@ from nurbsfeed.planning.path_model import jump_speeds, kappa_n_jumps
 # a piece's share of the chain's parameter range is at least this share of the mean: a piece of
 # almost no length still gets spans the knot check accepts
 MIN_RANGE_SHARE = 1e-6
+# the shares of the parameter range (`_piece_ranges`) spread at most this much
+MAX_RANGE_SPREAD = 1e9
+# a joint's knot is removed where that moves the curve by no more than this (`remove_knot`):
+# far below any output resolution (1e-8 mm at 8 decimals), far above rounding (1e-13 mm)
+REMOVAL_TOL_MM = 1e-9
 # half-width of the feed step that caps a near-tangent joint, as a share of the chain's
 # parameter range: the planner adds a node at each step, so the cap holds at the joint itself
 JOINT_CAP_HALF_WIDTH = 1e-9
@@ -106,41 +111,143 @@ def merge_curves(curves: list[NurbsCurve], name: str = "") -> Chain:
             arr.setflags(write=False)
         return Chain(curves[0], (curves[0],), one, whole)
     p = curves[0].degree
-    lengths = np.array([float(np.sum(np.linalg.norm(np.diff(c.points, axis=0), axis=1)))
-                        for c in curves])
-    mean = float(lengths.mean()) if lengths.size else 0.0
-    ranges = np.maximum(lengths, MIN_RANGE_SHARE * mean) if mean > 0.0 else np.ones(len(curves))
-    ranges = ranges / ranges.sum()
+    ranges = _piece_ranges(curves)
     starts = np.concatenate(([0.0], np.cumsum(ranges)[:-1]))
     knots = [curves[0].knots[:-1] * ranges[0]]
-    points = [curves[0].points]
-    weights = [curves[0].weights]
+    homogeneous = [curves[0].homogeneous]
     for i in range(1, len(curves)):
         c = curves[i]
         tail = c.knots[p + 1:] * ranges[i] + starts[i]
         knots.append(tail if i == len(curves) - 1 else tail[:-1])
-        points.append(c.points[1:])
-        weights.append(c.weights[1:] * (weights[-1][-1] / c.weights[0]))
+        # the piece's weights scaled so that its first equals the last one before it
+        homogeneous.append(c.homogeneous[1:] * (homogeneous[-1][-1, 3] / c.homogeneous[0, 3]))
     all_knots = np.concatenate(knots)
     all_knots[-p - 1:] = 1.0  # exactly 1, whatever the sum of the shares rounded to
-    all_weights = np.concatenate(weights)
-    # the largest weight in [1, 2), as NurbsCurve.build keeps it (a power of two: exact)
-    all_weights = all_weights * 2.0 ** -np.floor(np.log2(all_weights.max()))
-    all_points = np.concatenate(points)
-    for arr in (all_knots, all_weights, all_points):
-        arr.setflags(write=False)
-    merged = NurbsCurve(p, all_knots, all_points, all_weights, name or curves[0].name)
-    u_start = starts.copy()
-    u_start[0] = 0.0
+    pw = np.concatenate(homogeneous)
     # a joint's parameter is the merged curve's knot there, exactly
     index = len(curves[0].knots) - 1 - p
+    u_start = np.zeros(len(curves))
     for i in range(1, len(curves)):
         u_start[i] = all_knots[index]
         index += len(curves[i].knots) - p - 2
+    tol = _removal_tolerance(pw)
+    for u in u_start[1:]:
+        # the most removals whose weights stay positive and within the input envelope (a
+        # semicircle is one quadratic span whose middle weight is 0: exact, and refused)
+        for num in range(p, 0, -1):
+            knots_left, pw_left = remove_knot(p, all_knots, pw, float(u), num, tol)
+            w = pw_left[:, 3]
+            if w.min() > 0.0 and w.max() <= MAX_WEIGHT_RATIO * w.min():
+                all_knots, pw = knots_left, pw_left
+                break
+    weights = pw[:, 3] * 2.0 ** -np.floor(np.log2(pw[:, 3].max()))  # the largest in [1, 2), as
+    # NurbsCurve.build keeps it (a power of two: exact)
+    points = pw[:, :3] / pw[:, 3:]
+    for arr in (all_knots, weights, points):
+        arr.setflags(write=False)
+    merged = NurbsCurve(p, all_knots, points, weights, name or curves[0].name)
     ranges = np.diff(np.concatenate((u_start, [1.0])))
     for arr in (u_start, ranges):
         arr.setflags(write=False)
     return Chain(merged, tuple(curves), u_start, ranges)
+
+
+def _piece_ranges(curves: list[NurbsCurve]) -> np.ndarray:
+    """Each piece's share (N,) of the merged parameter range [0, 1]: chosen so that |C'| is
+    continuous at every joint (piece i + 1's range is piece i's times the ratio of its speeds
+    |C'| in its own stored u, at its start and at the end of piece i). A chain cut from one
+    curve then has that curve's own parameterization, and where its joints are smooth the knot
+    removal after the merge gives that curve back (`remove_knot`). Where a speed is 0 at a
+    joint (a repeated control point), the ratio of the pieces' control polygon lengths is taken
+    instead; shares spread wider than MAX_RANGE_SPREAD are all taken from the lengths."""
+    lengths = np.array([float(np.sum(np.linalg.norm(np.diff(c.points, axis=0), axis=1)))
+                        for c in curves])
+    mean = float(lengths.mean()) if lengths.size else 0.0
+    by_length = (np.maximum(lengths, MIN_RANGE_SHARE * mean) if mean > 0.0
+                 else np.ones(len(curves)))
+    ranges = np.ones(len(curves))
+    for i in range(1, len(curves)):
+        end = curves[i - 1].speed(np.array([np.nextafter(curves[i - 1].u_max, -np.inf)]))[0]
+        start = curves[i].speed(np.array([curves[i].u_min]))[0]
+        ratio = start / end if end > 0.0 and start > 0.0 else by_length[i] / by_length[i - 1]
+        ranges[i] = ranges[i - 1] * ratio
+    if not (np.all(np.isfinite(ranges))
+            and ranges.max() <= MAX_RANGE_SPREAD * ranges.min()):
+        ranges = by_length
+    return ranges / ranges.sum()
+
+
+def _removal_tolerance(pw: np.ndarray) -> float:
+    """The bound on the homogeneous points' moves that keeps every point of the curve within
+    REMOVAL_TOL_MM (Piegl & Tiller eq. 5.30: d w_min / (1 + max |P|))."""
+    weights = pw[:, 3]
+    size = float(np.max(np.linalg.norm(pw[:, :3] / weights[:, None], axis=1)))
+    return REMOVAL_TOL_MM * float(weights.min()) / (1.0 + size)
+
+
+def remove_knot(degree: int, knots: np.ndarray, pw: np.ndarray, u: float, num: int,
+                tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """The knot u removed up to `num` times from the curve (knots (m,), homogeneous points
+    (n, 4)) while the curve moves by no more than `tol` in homogeneous space (Piegl & Tiller,
+    The NURBS Book, A5.8): (knots (m - t,), points (n - t, 4)), t the removals made. At a
+    joint where the chain is as smooth as the pieces' own spans the knot goes down to the
+    multiplicity the pieces' curve had there (a chain cut from one curve is that curve again);
+    at a corner nothing moves within tol and nothing is removed."""
+    p = degree
+    r = int(np.searchsorted(knots, u, side="right")) - 1  # the last copy of u
+    s = int(np.count_nonzero(knots == u))
+    if knots[r] != u or s == 0:
+        return knots, pw
+    num = min(num, s)
+    out = pw.copy()
+    order = p + 1
+    first, last = r - p, r - s
+    t = 0
+    temp = np.empty((2 * p + 1, pw.shape[1]))
+    while t < num:
+        off = first - 1
+        temp[0] = out[off]
+        temp[last + 1 - off] = out[last + 1]
+        i, j = first, last
+        ii, jj = 1, last - off
+        while j - i > t:
+            alfi = (u - knots[i]) / (knots[i + order + t] - knots[i])
+            alfj = (u - knots[j - t]) / (knots[j + order] - knots[j - t])
+            temp[ii] = (out[i] - (1.0 - alfi) * temp[ii - 1]) / alfi
+            temp[jj] = (out[j] - alfj * temp[jj + 1]) / (1.0 - alfj)
+            i += 1
+            ii += 1
+            j -= 1
+            jj -= 1
+        if j - i < t:
+            removable = np.linalg.norm(temp[ii - 1] - temp[jj + 1]) <= tol
+        else:
+            alfi = (u - knots[i]) / (knots[i + order + t] - knots[i])
+            removable = np.linalg.norm(
+                out[i] - (alfi * temp[ii + t + 1] + (1.0 - alfi) * temp[ii - 1])) <= tol
+        if not removable:
+            break
+        i, j = first, last
+        while j - i > t:
+            out[i] = temp[i - off]
+            out[j] = temp[j - off]
+            i += 1
+            j -= 1
+        first -= 1
+        last += 1
+        t += 1
+    if t == 0:
+        return knots, pw
+    new_knots = np.delete(knots, np.arange(r - t + 1, r + 1))
+    fout = (2 * r - s - p) // 2
+    j = i = fout
+    for k in range(1, t):
+        if k % 2 == 1:
+            i += 1
+        else:
+            j -= 1
+    keep = np.concatenate((out[:j], out[i + 1:]))
+    return new_knots, keep
 
 
 def chain_feed(chain: Chain, feeds: list[tuple[np.ndarray, np.ndarray]]
