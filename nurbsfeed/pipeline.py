@@ -480,6 +480,26 @@ def _curve_results(window: ChainWindow, index: int, plan: Plan, chain: Chain,
     return results
 
 
+def joint_speeds(plan: Plan, chain: Chain, method: str = "rk2c") -> np.ndarray:
+    """The speed (J,) at which the stepped points of a chain's plan cross each joint: the chord
+    from the last point at or before the joint to the first after it, over one period (0 where
+    the motion rests on the joint)."""
+    joint_u = chain.joint_u
+    speeds = np.zeros(joint_u.size)
+    found = 0
+    last_u, last_point = -np.inf, np.zeros(3)
+    for chunk in Stepping(plan, method).chunks():
+        u = np.concatenate(([last_u], chunk.u))
+        points = np.concatenate((last_point[None, :], chunk.points))
+        while found < joint_u.size and u[-1] > joint_u[found]:
+            after = int(np.searchsorted(u, joint_u[found], side="right"))
+            step = points[after] - points[after - 1]
+            speeds[found] = float(np.linalg.norm(step)) / plan.limits.period_s
+            found += 1
+        last_u, last_point = float(u[-1]), points[-1]
+    return speeds
+
+
 def convert_file(source: Path, target: Path | None, machine: Machine, method: str = "rk2c",
                  dialect: str = "auto", trace_path: Path | None = None,
                  stdout: BinaryIO | None = None,
