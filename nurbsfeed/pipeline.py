@@ -493,8 +493,9 @@ def joint_speeds(plan: Plan, chain: Chain, method: str = "rk2c") -> np.ndarray:
         points = np.concatenate((last_point[None, :], chunk.points))
         while found < joint_u.size and u[-1] > joint_u[found]:
             after = int(np.searchsorted(u, joint_u[found], side="right"))
-            step = points[after] - points[after - 1]
-            speeds[found] = float(np.linalg.norm(step)) / plan.limits.period_s
+            if u[after - 1] != joint_u[found]:  # else a point rests on the joint: 0
+                step = points[after] - points[after - 1]
+                speeds[found] = float(np.linalg.norm(step)) / plan.limits.period_s
             found += 1
         last_u, last_point = float(u[-1]), points[-1]
     return speeds

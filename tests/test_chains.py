@@ -23,6 +23,7 @@ from nurbsfeed.pipeline import convert_file
 from nurbsfeed.planning.chain import (
     JOINT_CAP_HALF_WIDTH,
     chain_feed,
+    elevate,
     joint_feed,
     joints,
     merge_curves,
@@ -311,3 +312,46 @@ def test_long_chains_are_planned_in_windows_that_end_at_a_joint(
     # still counts the pieces in file order
     assert sorted(set(rows[:, 0].astype(int))) == list(range(10))
     assert np.count_nonzero(np.abs(rows[:, 5]) < 1e-9) >= 2 * len(comments)
+
+
+# ---- pieces of different degrees, and the plan listing -----------------------------------------
+
+def test_a_lower_degree_piece_is_raised_to_the_chains_degree() -> None:
+    """The Fanuc multi-curve sample's second curve (quadratic) continues its first (cubic): the
+    chain is cubic, the quadratic raised (`elevate`), and each piece is still what the
+    textbook evaluator reads from the program's own control points."""
+    blocks = [item.in_mm() for item in read_program(SAMPLES / "fanuc-multi-curve.nc")
+              if isinstance(item, CurveBlock)][:2]
+    assert [b.curve.degree for b in blocks] == [3, 2]
+    chain = merge_curves([b.curve for b in blocks])
+    assert chain.curve.degree == 3
+    for i, block in enumerate(blocks):
+        c = block.curve
+        own_u = np.linspace(0.0, 1.0, 31)
+        got = chain.curve.point(chain.merged_u(i, own_u))
+        for u, point in zip(own_u, got):
+            want, _, _ = evaluate(c.degree, c.knots, c.points, c.weights, u)
+            assert point == pytest.approx(want, abs=1e-9)
+    # the quadratic alone, raised twice: the same curve, its weights within its own
+    raised = elevate(blocks[1].curve, 4)
+    u = np.linspace(0.0, 1.0, 501)
+    assert np.abs(raised.point(u) - blocks[1].curve.point(u)).max() < 1e-10
+    assert raised.weights.min() >= blocks[1].curve.weights.min() * (1 - 1e-12)
+
+
+def test_plan_lists_the_joints_of_a_chain(tmp_path: Path) -> None:
+    """`plan`: one entry for the chain, a joint row per joint: the corner of the multi-curve
+    sample (1.9 degrees: above the planner's corner tolerance) rests, speed 0."""
+    from click.testing import CliRunner
+
+    from nurbsfeed.cli import main
+
+    result = CliRunner().invoke(main, ["plan", str(SAMPLES / "fanuc-multi-curve.nc")],
+                                catch_exceptions=False)
+    assert result.exit_code == 0, result.stderr
+    text = result.stdout
+    assert "curves 0-1, a chain planned as one curve" in text and "curve 2 " in text
+    row = text.split("joints (mm, mm/s")[1].splitlines()[2].split()
+    assert row[:2] == ["0", "0|1"]
+    assert float(row[3]) == pytest.approx(1.909, abs=1e-3)  # the turn, degrees
+    assert float(row[5]) == 0.0 and float(row[6]) == 0.0  # a corner: capped to rest, rests

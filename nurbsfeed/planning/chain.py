@@ -85,9 +85,10 @@ def can_follow(last: NurbsCurve, nxt: NurbsCurve, weights: tuple[float, float, f
                ) -> tuple[float, float, float] | None:
     """Whether `nxt` may be merged after `last`, the chain's last piece, given the chain's
     weights so far (lowest, highest, last, as the merged curve holds them): the chain's weights
-    with `nxt` merged, or None when a degree differs, a piece has no length (it is written as
+    with `nxt` merged (a piece of a lower degree than the chain's is raised to it, `elevate`:
+    its weights stay within its own), or None when a piece has no length (it is written as
     such, alone) or the merged weights would spread beyond MAX_WEIGHT_RATIO."""
-    if nxt.degree != last.degree or nxt.is_degenerate or last.is_degenerate:
+    if nxt.is_degenerate or last.is_degenerate:
         return None
     factor = weights[2] / float(nxt.weights[0])
     lo = min(weights[0], float(nxt.weights.min()) * factor)
@@ -110,7 +111,8 @@ def merge_curves(curves: list[NurbsCurve], name: str = "") -> Chain:
         for arr in (one, whole):
             arr.setflags(write=False)
         return Chain(curves[0], (curves[0],), one, whole)
-    p = curves[0].degree
+    p = max(c.degree for c in curves)
+    curves = [c if c.degree == p else elevate(c, p) for c in curves]
     ranges = _piece_ranges(curves)
     starts = np.concatenate(([0.0], np.cumsum(ranges)[:-1]))
     knots = [curves[0].knots[:-1] * ranges[0]]
@@ -132,14 +134,7 @@ def merge_curves(curves: list[NurbsCurve], name: str = "") -> Chain:
         index += len(curves[i].knots) - p - 2
     tol = _removal_tolerance(pw)
     for u in u_start[1:]:
-        # the most removals whose weights stay positive and within the input envelope (a
-        # semicircle is one quadratic span whose middle weight is 0: exact, and refused)
-        for num in range(p, 0, -1):
-            knots_left, pw_left = remove_knot(p, all_knots, pw, float(u), num, tol)
-            w = pw_left[:, 3]
-            if w.min() > 0.0 and w.max() <= MAX_WEIGHT_RATIO * w.min():
-                all_knots, pw = knots_left, pw_left
-                break
+        all_knots, pw = _remove_valid(p, all_knots, pw, float(u), p, tol)
     weights = pw[:, 3] * 2.0 ** -np.floor(np.log2(pw[:, 3].max()))  # the largest in [1, 2), as
     # NurbsCurve.build keeps it (a power of two: exact)
     points = pw[:, :3] / pw[:, 3:]
@@ -150,6 +145,67 @@ def merge_curves(curves: list[NurbsCurve], name: str = "") -> Chain:
     for arr in (u_start, ranges):
         arr.setflags(write=False)
     return Chain(merged, tuple(curves), u_start, ranges)
+
+
+def insert_knot(degree: int, knots: np.ndarray, pw: np.ndarray, u: float
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """u inserted once into the curve (knots (m,), homogeneous points (n, 4)) -> (m + 1,),
+    (n + 1, 4): the same curve (Boehm; Piegl & Tiller A5.1 with r = 1)."""
+    k = int(np.searchsorted(knots, u, side="right")) - 1
+    out = np.empty((len(pw) + 1, pw.shape[1]))
+    out[:k - degree + 1] = pw[:k - degree + 1]
+    out[k + 1:] = pw[k:]
+    for i in range(k - degree + 1, k + 1):
+        alpha = (u - knots[i]) / (knots[i + degree] - knots[i])
+        out[i] = alpha * pw[i] + (1.0 - alpha) * pw[i - 1]
+    return np.insert(knots, k + 1, u), out
+
+
+def elevate(curve: NurbsCurve, degree: int) -> NurbsCurve:
+    """The same curve of a higher `degree` (design §3b: a chain's pieces share one degree): cut
+    into Bézier spans by knot insertion, each span raised one degree at a time (Q_i = i/(p+1)
+    P_i-1 + (1 - i/(p+1)) P_i, in homogeneous coordinates), then each interior knot removed
+    as far as the curve does not move (`remove_knot`): back to the continuity it had."""
+    p = curve.degree
+    knots, pw = curve.knots.copy(), curve.homogeneous.copy()
+    breaks = curve.span_breaks[1:-1]
+    for u in breaks:
+        while np.count_nonzero(knots == u) < p:
+            knots, pw = insert_knot(p, knots, pw, float(u))
+    spans = np.concatenate(([curve.u_min], breaks, [curve.u_max]))
+    for q in range(p, degree):
+        n_spans = spans.size - 1
+        raised = np.empty((n_spans * (q + 1) + 1, 4))
+        for k in range(n_spans):
+            bez = pw[k * q:k * q + q + 1]
+            i = np.arange(1, q + 1)[:, None] / (q + 1)
+            raised[k * (q + 1)] = bez[0]
+            raised[k * (q + 1) + 1:k * (q + 1) + q + 1] = i * bez[:-1] + (1.0 - i) * bez[1:]
+        raised[-1] = pw[-1]
+        pw = raised
+    knots = np.concatenate(([spans[0]] * (degree + 1),
+                            np.repeat(spans[1:-1], degree), [spans[-1]] * (degree + 1)))
+    tol = _removal_tolerance(pw)
+    for u in spans[1:-1]:
+        knots, pw = _remove_valid(degree, knots, pw, float(u), degree, tol)
+    weights = pw[:, 3]
+    points = pw[:, :3] / weights[:, None]
+    for arr in (knots, points, weights):
+        arr.setflags(write=False)
+    return NurbsCurve(degree, knots, points, weights, curve.name, curve.u_origin, curve.u_scale)
+
+
+def _remove_valid(degree: int, knots: np.ndarray, pw: np.ndarray, u: float, num: int,
+                  tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """`remove_knot`, as many times (up to num) as leave the weights positive and within the
+    input envelope (a semicircle is one quadratic span whose middle weight is 0: exact, and
+    refused)."""
+    for times in range(num, 0, -1):
+        knots_left, pw_left = remove_knot(degree, knots, pw, u, times, tol)
+        w = pw_left[:, 3]
+        if w.min() > 0.0 and w.max() <= MAX_WEIGHT_RATIO * w.min():
+            return knots_left, pw_left
+    return knots, pw
 
 
 def _piece_ranges(curves: list[NurbsCurve]) -> np.ndarray:
