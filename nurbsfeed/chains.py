@@ -4,7 +4,10 @@ A curve joins the one before it when it starts where that one ended, as the outp
 points (equal coordinates at the output's decimals), and everything read between them joins too
 (`PassThrough.joins`: comments, N numbers, zero-length G0 / G1 moves, modal words that change
 nothing); both curves must be of one degree, unit, distance mode and line ending
-(`planning.chain.can_follow` for the geometry). In a G91 program only lines without words may
+(`planning.chain.can_follow` for the geometry), and the next must leave in the direction the
+last one arrived in: a corner (a turn above the planner's corner tolerance, CORNER_TURN_RAD) ends
+a chain, since the motion comes to rest there whether the curves are planned together or apart,
+and apart one curve's plan never depends on another's. In a G91 program only lines without words may
 lie between (the moves are written absolute, bracketed by G90 ... G91: a word between them
 would be read in the wrong mode).
 
@@ -26,7 +29,7 @@ import numpy as np
 from nurbsfeed.gcode.writer import round_ticks, written_decimals
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.machine import Machine
-from nurbsfeed.planning.chain import can_follow, chain_weights
+from nurbsfeed.planning.chain import CORNER_TURN_RAD, can_follow, chain_weights
 from nurbsfeed.planning.planner import GRID_STEPS
 from nurbsfeed.program import MM_PER_UNIT, CurveBlock, PassThrough, ProgramItem
 
@@ -100,7 +103,7 @@ class _Window:
                            block.units):
             return False
         weights = can_follow(last.curve, block.curve, self.weights)
-        if weights is None:
+        if weights is None or _turn(last.curve, block.curve) > CORNER_TURN_RAD:
             return False
         self.weights = weights
         self.blocks.append(block)

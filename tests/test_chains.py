@@ -270,21 +270,34 @@ def _lines_in_place(out: str, between: list[str], xyz: np.ndarray, crossings: np
             assert value == pytest.approx(point["XY".index(axis)], abs=1e-4)
 
 
-def test_a_corner_between_two_curves_rests(tmp_path: Path) -> None:
-    """Two curves meeting at a right angle: one chain, planned to rest at the corner (v = 0
-    there), and the curve after goes on from it."""
+def test_a_corner_between_two_curves_ends_the_chain_and_rests(tmp_path: Path) -> None:
+    """Two curves meeting at a right angle: the motion rests at the corner (v = 0 there) as two
+    curves planned apart, and the line between them comes at the corner."""
     text = ("G21 G90 G17 G94\nG0 X0. Y0. Z0.\n"
             "G06.2 P4 K0. X0. Y0. Z0. F6000.\nK0. X10. Y0.\nK0. X20. Y0.\nK0. X30. Y0.\n"
             "K1.\nK1.\nK1.\nK1.\n(corner)\n"
             "G06.2 P4 K0. X30. Y0. Z0.\nK0. X30. Y10.\nK0. X30. Y20.\nK0. X30. Y30.\n"
             "K1.\nK1.\nK1.\nK1.\nM30\n")
     out, rows, _ = _convert(tmp_path, "corner.nc", text)
-    assert out.count("(nurbsfeed: curves 0-1 chained") == 1
+    assert "chained" not in out and "(nurbsfeed: curve 1 " in out
     at_corner = np.flatnonzero(np.all(np.abs(rows[:, 8:11] - [30.0, 0.0, 0.0]) < 1e-12, axis=1))
-    assert at_corner.size >= 1
-    assert rows[at_corner[0], 5] == 0.0  # v at the corner point
+    assert at_corner.size == 2  # the first curve's end and the second's start
+    assert np.all(np.abs(rows[at_corner, 5]) < 1e-12)
     lines = out.splitlines()
-    assert lines[lines.index("(corner)") - 1].startswith("X30.")
+    at = lines.index("(corner)")
+    assert lines[at - 2].startswith("X30.") and lines[at - 1] == "F6000."  # then F restored
+
+
+def test_a_turn_below_the_corner_tolerance_chains(tmp_path: Path) -> None:
+    """A turn of 1e-4 rad (below the planner's corner tolerance) joins, and the motion does not
+    stop there; at 1e-3 rad the chain ends."""
+    for turn, joined in ((1e-4, True), (1e-3, False)):
+        a, b = _two_lines(turn)
+        text = gcode_chain([Piece(3, c.knots, c.points, c.weights) for c in (a, b)], 6000.0)
+        out, rows, _ = _convert(tmp_path, "turn.nc", text)
+        assert ("chained" in out) == joined
+        at_joint = np.flatnonzero(np.all(np.abs(rows[:, 8:11]) < 1e-3, axis=1))
+        assert (rows[at_joint, 5].min() > 50.0) == joined
 
 
 def test_a_move_with_length_ends_a_chain(tmp_path: Path) -> None:
@@ -340,18 +353,22 @@ def test_a_lower_degree_piece_is_raised_to_the_chains_degree() -> None:
 
 
 def test_plan_lists_the_joints_of_a_chain(tmp_path: Path) -> None:
-    """`plan`: one entry for the chain, a joint row per joint: the corner of the multi-curve
-    sample (1.9 degrees: above the planner's corner tolerance) rests, speed 0."""
+    """`plan`: one entry for the chain, a row per joint: a knot cut turns by 0, has no cap and
+    is crossed at speed; the curve after the chain keeps its own index."""
     from click.testing import CliRunner
 
     from nurbsfeed.cli import main
 
-    result = CliRunner().invoke(main, ["plan", str(SAMPLES / "fanuc-multi-curve.nc")],
-                                catch_exceptions=False)
+    pieces, _ = _pieces("butterfly.json", 3)
+    source = tmp_path / "three.nc"
+    # the butterfly is closed, its seam smooth: an M5 keeps a fourth curve there apart
+    source.write_text(gcode_chain(pieces, 12000.0).replace("M30\n", "M5\n")
+                      + gcode_chain(pieces[:1], 12000.0).split("\n", 2)[2])
+    result = CliRunner().invoke(main, ["plan", str(source)], catch_exceptions=False)
     assert result.exit_code == 0, result.stderr
     text = result.stdout
-    assert "curves 0-1, a chain planned as one curve" in text and "curve 2 " in text
-    row = text.split("joints (mm, mm/s")[1].splitlines()[2].split()
-    assert row[:2] == ["0", "0|1"]
-    assert float(row[3]) == pytest.approx(1.909, abs=1e-3)  # the turn, degrees
-    assert float(row[5]) == 0.0 and float(row[6]) == 0.0  # a corner: capped to rest, rests
+    assert "curves 0-2, a chain planned as one curve" in text and "\ncurve 3 " in text
+    rows = [line.split() for line in text.split("joints (mm, mm/s")[1].splitlines()[2:4]]
+    assert [row[:2] for row in rows] == [["0", "0|1"], ["1", "1|2"]]
+    for row in rows:
+        assert float(row[3]) < 1e-6 and row[5] == "-" and float(row[6]) > 20.0
