@@ -21,7 +21,7 @@ from nurbsfeed.pipeline import convert_file
 from tests.conftest import SAMPLES
 
 FANUC_ONLY_LINE = re.compile(r"^N\d+\s+G0?5(\.1)?\s+[PQ]\d+\s*$")
-CURVE_COMMENT = re.compile(r"^\(nurbsfeed: curve ")
+CURVE_COMMENT = re.compile(r"^\(nurbsfeed: curves? ")  # a curve, or a chain (design §3b)
 MOVE_LINE = re.compile(r"^(G1 )?(?=[XYZF])")
 WORD = re.compile(r"([XYZF])(-?\d*\.?\d*)")
 
