@@ -1,4 +1,8 @@
-"""read -> plan -> interpolate -> write for one input file. No printing: callers get reports.
+"""read -> chain -> plan -> interpolate -> write for one input file. No printing: callers get
+reports.
+
+Curves that join are gathered into chains (chains.chain_items) and each chain is merged into one
+curve (planning.chain) and converted as one (`convert_window`); a curve alone is a chain of one.
 
 The program is streamed item by item: the reader (readers/) reads the input as the items are
 taken, pass-through lines are copied as bytes, each curve block is planned, then stepped and

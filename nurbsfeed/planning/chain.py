@@ -18,10 +18,10 @@ capped by the path model's jerk rule (path_model.jump_speeds), and a piece's pro
 a step of the merged feed at its range. What the planner does not see is a turn below its
 corner tolerance (1.4e-4 rad): `joint_caps` turns it into a feed step around the joint.
 
-Each piece gets a share of the parameter range proportional to its control polygon's length, so
-that |C'| stays of one size along the chain (the stepping's first guess of du/ds is good).
-Pieces of another degree, or whose weights would break the input envelope, end a chain
-(`can_follow`): degree elevation is not done.
+Each piece gets the share of the parameter range that keeps |C'| continuous at its joints, and
+each joint's knot is then removed as far as the curve does not move (`remove_knot`): a chain cut
+from one curve is that curve again. A piece of a lower degree is raised to the chain's
+(`elevate`); pieces whose weights would break the input envelope end a chain (`can_follow`).
 """
 
 from __future__ import annotations
