@@ -13,8 +13,9 @@ would be read in the wrong mode).
 
 Memory stays bounded: a chain is handed on in windows of at most MAX_WINDOW_CURVES curves and
 about MAX_WINDOW_NODES planning nodes. A window ends at a joint and the motion rests there (the
-planner plans a curve from rest to rest); the joint chosen is the one that turns most in the
-window's second half, where the speed is likely lowest anyway. Lines read between two curves are
+planner plans a curve from rest to rest); the joint chosen is the most curved one in the
+window's second half, where the speed limit sqrt(A_n / kappa) is lowest (inside a chain no joint
+turns: a corner ends it). Lines read between two curves are
 held until the chain is cut or ends (at most MAX_GAP_LINES of them between two curves, else the
 chain ends there).
 """
@@ -61,6 +62,18 @@ def _same_point(a_mm: np.ndarray, b_mm: np.ndarray, machine: Machine, units: str
     places = written_decimals(machine.decimals, units)
     ticks = round_ticks(np.stack([a_mm, b_mm]), places, 1.0 / MM_PER_UNIT[units])
     return bool(np.array_equal(ticks[0], ticks[1]))
+
+
+def _joint_kappa(last: NurbsCurve, nxt: NurbsCurve) -> float:
+    """The larger curvature (1/mm) on either side of the joint from `last` to `nxt`: where it is
+    high the speed limit sqrt(A_n / kappa) is low."""
+    kappas = []
+    for curve, u in ((last, np.nextafter(last.u_max, -np.inf)), (nxt, nxt.u_min)):
+        _, c1, c2 = curve.derivatives(np.array([u]))
+        speed = float(np.linalg.norm(c1[0]))
+        kappas.append(float(np.linalg.norm(np.cross(c1[0], c2[0]))) / speed**3
+                      if speed > 0.0 else 0.0)
+    return max(kappas)
 
 
 def _turn(last: NurbsCurve, nxt: NurbsCurve) -> float:
@@ -118,13 +131,13 @@ class _Window:
                                                         and len(self.blocks) > 1)
 
     def cut(self) -> Iterator[ChainWindow | PassThrough]:
-        """The window up to the joint that turns most in its second half, then the lines at
-        that joint; the curves after it stay, as the start of the next window."""
+        """The window up to the most curved joint in its second half, then the lines at that
+        joint; the curves after it stay, as the start of the next window."""
         n = len(self.blocks)
         first = (n - 1) // 2
-        turns = [_turn(self.blocks[j].curve, self.blocks[j + 1].curve)
-                 for j in range(first, n - 1)]
-        j = first + int(np.argmax(turns))
+        kappas = [_joint_kappa(self.blocks[j].curve, self.blocks[j + 1].curve)
+                  for j in range(first, n - 1)]
+        j = first + int(np.argmax(kappas))
         yield ChainWindow(tuple(self.blocks[:j + 1]), tuple(self.between[:j]))
         yield from self.between[j]
         self.blocks = self.blocks[j + 1:]

@@ -327,10 +327,16 @@ def test_a_move_with_length_ends_a_chain(tmp_path: Path) -> None:
     assert "chained" not in out
 
 
+def _kappa_at(piece: Piece, u: float) -> float:
+    _, c1, c2 = evaluate(piece.degree, piece.knots, piece.points, piece.weights, u)
+    return float(np.linalg.norm(np.cross(c1, c2)) / np.linalg.norm(c1) ** 3)
+
+
 def test_long_chains_are_planned_in_windows_that_end_at_a_joint(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """Windows of at most MAX_WINDOW_CURVES curves; each ends at the joint that turns most in
-    its second half, where the motion rests, and the lines there come between the windows."""
+    """Windows of at most MAX_WINDOW_CURVES curves; each ends at the most curved joint in its
+    second half (curvature from the textbook evaluator here), where the motion rests, and the
+    lines there come between the windows."""
     monkeypatch.setattr(chains, "MAX_WINDOW_CURVES", 4)
     pieces, whole = _pieces("butterfly.json", 10)
     text = gcode_chain(pieces, 12000.0, "fanuc", [[f"(joint {j + 1})"] for j in range(9)])
@@ -338,10 +344,39 @@ def test_long_chains_are_planned_in_windows_that_end_at_a_joint(
     comments = [line for line in out.splitlines() if line.startswith("(nurbsfeed: curve")]
     assert len(comments) >= 3 and all("chained" in c for c in comments)
     assert [f"(joint {j + 1})" in out for j in range(9)] == [True] * 9
+    # the first window: 5 curves gathered (one more than 4), cut at joint 2 or 3 (its second
+    # half), whichever is more curved
+    kappa = [max(_kappa_at(pieces[j], pieces[j].knots[-1]),
+                 _kappa_at(pieces[j + 1], pieces[j + 1].knots[0])) for j in range(9)]
+    cut = 2 + int(np.argmax(kappa[2:4]))
+    assert comments[0].startswith(f"(nurbsfeed: curves 0-{cut} chained")
     # the windows' rests: v = 0 at each window's last point, and the trace's curve column
     # still counts the pieces in file order
     assert sorted(set(rows[:, 0].astype(int))) == list(range(10))
     assert np.count_nonzero(np.abs(rows[:, 5]) < 1e-9) >= 2 * len(comments)
+
+
+def test_check_judges_a_chain_and_its_joints_lines(tmp_path: Path) -> None:
+    """`check` passes a converted chain (its limits read from positions across the joints) and
+    fails it when a joint's line is gone from among the moves."""
+    from click.testing import CliRunner
+
+    from nurbsfeed.cli import main
+
+    pieces, _ = _pieces("circle.json", 4)
+    source = tmp_path / "chain.nc"
+    source.write_text(gcode_chain(pieces, 6000.0, "fanuc", [[f"(joint {j})"] for j in range(3)]))
+    target = tmp_path / "chain.out"
+    convert_file(source, target, DEFAULT)
+    ok = CliRunner().invoke(main, ["check", str(source), str(target)], catch_exceptions=False)
+    assert ok.exit_code == 0, ok.stdout
+    assert "X jerk from positions" in ok.stdout
+    target.write_text(target.read_text().replace("(joint 1)\n", ""))
+    broken = CliRunner().invoke(main, ["check", str(source), str(target)],
+                                catch_exceptions=False)
+    assert broken.exit_code == 1
+    assert "the lines of joint 2 of the chain are missing among its moves: '(joint 1)'" in (
+        broken.stdout)
 
 
 # ---- pieces of different degrees, and the plan listing -----------------------------------------
