@@ -40,8 +40,9 @@ MIN_RANGE_SHARE = 1e-6
 # the shares of the parameter range (`_piece_ranges`) spread at most this much
 MAX_RANGE_SPREAD = 1e9
 # a joint's knot is removed where that moves the curve by no more than this (`remove_knot`):
-# far below any output resolution (1e-8 mm at 8 decimals), far above rounding (1e-13 mm)
-REMOVAL_TOL_MM = 1e-9
+# a thousandth of the default output digit (1e-5 mm), far above what a knot inserted and removed
+# again moves by rounding (a butterfly joint: 1e-9 mm did not always hold)
+REMOVAL_TOL_MM = 1e-8
 # half-width of the feed step that caps a near-tangent joint, as a share of the chain's
 # parameter range: the planner adds a node at each step, so the cap holds at the joint itself
 JOINT_CAP_HALF_WIDTH = 1e-9
