@@ -425,3 +425,52 @@ def test_plan_lists_the_joints_of_a_chain(tmp_path: Path) -> None:
     assert [row[:2] for row in rows] == [["0", "0|1"], ["1", "1|2"]]
     for row in rows:
         assert float(row[3]) < 1e-6 and row[5] == "-" and float(row[6]) > 20.0
+
+
+# ---- seeded random chains -----------------------------------------------------------------------
+
+def _random_piece(rng: np.random.Generator, start: np.ndarray, leave: np.ndarray | None
+                  ) -> Piece:
+    """A random rational curve of degree 2-4 from `start`; leaving along `leave` (a tangent
+    joint: its second control point on that ray) when given."""
+    degree = int(rng.integers(2, 5))
+    n_ctrl = int(rng.integers(degree + 1, degree + 6))
+    points = np.vstack([start, start + np.cumsum(rng.normal(0.0, 5.0, (n_ctrl - 1, 3)),
+                                                 axis=0)])
+    if leave is not None:
+        points[1] = start + rng.uniform(1.0, 8.0) * leave
+    inner = np.sort(rng.uniform(0.0, 1.0, n_ctrl - degree - 1))
+    scale = rng.uniform(0.5, 20.0)
+    knots = scale * np.concatenate([np.zeros(degree + 1), inner, np.ones(degree + 1)])
+    return Piece(degree, knots, points, rng.uniform(0.5, 2.0, n_ctrl))
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_random_chains_merge_exactly_and_their_joints_turn_as_their_polygons(seed: int) -> None:
+    """Seeded random chains of 2-5 rational pieces of mixed degree, each joint tangent or
+    turned: the merged curve is every piece (textbook evaluator), and each joint's turn is the
+    angle between the control polygon's last leg and the next one's first (a clamped curve
+    leaves and arrives along them)."""
+    rng = np.random.default_rng(2900 + seed)
+    pieces = [_random_piece(rng, np.zeros(3), None)]
+    for _ in range(int(rng.integers(1, 5))):
+        last = pieces[-1].points
+        arrive = (last[-1] - last[-2]) / np.linalg.norm(last[-1] - last[-2])
+        pieces.append(_random_piece(rng, last[-1], arrive if rng.random() < 0.5 else None))
+    curves = [_built(p) for p in pieces]
+    chain = merge_curves(curves)
+    assert chain.curve.degree == max(p.degree for p in pieces)
+    for i, (piece, curve) in enumerate(zip(pieces, curves)):
+        own_u = np.linspace(0.0, 1.0, 17)
+        got = chain.curve.point(chain.merged_u(i, own_u))
+        for u, point in zip(curve.input_u(own_u), got):
+            want, _, _ = evaluate(piece.degree, piece.knots, piece.points, piece.weights, u)
+            assert point == pytest.approx(want, abs=1e-8)
+    found = joints(chain, DEFAULT.limits)
+    for j in range(len(pieces) - 1):
+        a = pieces[j].points[-1] - pieces[j].points[-2]
+        b = pieces[j + 1].points[1] - pieces[j + 1].points[0]
+        cos = a @ b / (np.linalg.norm(a) * np.linalg.norm(b))
+        turn = float(np.arccos(np.clip(cos, -1.0, 1.0)))
+        assert found.turn_rad[j] == pytest.approx(turn, abs=1e-6)
+        assert (found.cap_mm_s[j] == 0.0) == (turn > 1e-3)
