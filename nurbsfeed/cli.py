@@ -48,7 +48,10 @@ from nurbsfeed.machine import (
 )
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from nurbsfeed.machine import Machine
+    from nurbsfeed.planning.chain import Joints
     from nurbsfeed.planning.planner import Plan
     from nurbsfeed.program import CurveBlock
 
@@ -678,11 +681,12 @@ def _print_table(results: list[dict[str, Any]]) -> None:
 @dialect_option
 @reports_errors
 def plan(input: Path, dialect: str, reference: bool, **kwargs: Any) -> None:
-    """Key points, nominal and scanned speeds, segments and cycle time of every curve."""
+    """Key points, nominal and scanned speeds, segments and cycle time of every curve; a chain
+    of curves that join (planned as one) lists its joints: turn, curvature jump and speed."""
     from nurbsfeed.analysis import time_optimal_bound_s
-    from nurbsfeed.pipeline import plan_block
+    from nurbsfeed.chains import ChainWindow, chain_items
+    from nurbsfeed.pipeline import chain_block, joint_speeds, plan_block
     from nurbsfeed.planning.planner import KIND_NAMES
-    from nurbsfeed.program import CurveBlock
     from nurbsfeed.readers import read_program
 
     if reference:
@@ -693,14 +697,19 @@ def plan(input: Path, dialect: str, reference: bool, **kwargs: Any) -> None:
             sys.exit(EXIT_BAD_INPUT)
     machine = machine_from(kwargs)
     index = 0
-    for item in read_program(input, dialect):
-        if not isinstance(item, CurveBlock):
+    for window in chain_items(read_program(input, dialect), machine):
+        if not isinstance(window, ChainWindow):
             continue
-        item = item.in_mm()
+        item, chain, found = chain_block(window, machine.limits)
         p = plan_block(item, machine)
         lim = p.limits
         unit = "mm"  # an inch program's too: every report is in the profile's unit
-        click.echo(f"curve {index} {item.curve.name} ({item.location})")
+        n_curves = len(window.blocks)
+        if n_curves == 1:
+            click.echo(f"curve {index} {item.curve.name} ({item.location})")
+        else:
+            click.echo(f"curves {index}-{index + n_curves - 1}, a chain planned as one curve "
+                       f"({item.location}; u below is the chain's, 0 to 1)")
         click.echo(f"  degree {item.curve.degree}, {item.curve.n_ctrl} control points, "
                    f"length {p.length_mm:.6f} {unit}")
         keys = (f"{len(p.key_node)} rests (the {p.planner} planner's keys)" if p.planner != "scurve"
@@ -718,6 +727,8 @@ def plan(input: Path, dialect: str, reference: bool, **kwargs: Any) -> None:
             _echo_stretches(p, unit)
         else:
             _echo_segments(p, unit)
+        if n_curves > 1:
+            _echo_joints(index, found, joint_speeds(p, chain), unit)
         bound = time_optimal_bound_s(p, item)
         click.echo(f"  cycle time {p.cycle_time_s:.3f} s ({p.n_periods} periods of "
                    f"{lim.period_s * 1e3:g} ms; time scale {p.time_scale:.9f})")
@@ -726,9 +737,26 @@ def plan(input: Path, dialect: str, reference: bool, **kwargs: Any) -> None:
                    "  time-optimal bound 0 s (zero length)")
         if reference and bound > 0:
             click.echo(_reference_line(item, machine, p.cycle_time_s, bound))
-        index += 1
+        index += n_curves
     if index == 0:
         click.echo("no NURBS curves in the input")
+
+
+def _echo_joints(first: int, found: Joints, speed_mm_s: np.ndarray, unit: str) -> None:
+    """A chain's joints (design §3b): where, how far the tangent turns, the jump of the
+    curvature vector, the cap the period rule sets (a corner rests: 0) and the speed the
+    stepped points cross at."""
+    import numpy as np
+
+    click.echo(f"  joints ({unit}, {unit}/s; speed from the stepped points across the joint):")
+    click.echo(f"  {'#':>3} {'curves':>11} {'u':>12} {'turn_deg':>10} {'dkappa':>12} "
+               f"{'cap':>10} {'speed':>10}")
+    for j in range(found.u.size):
+        curves = f"{first + j}|{first + j + 1}"
+        cap = "-" if np.isinf(found.cap_mm_s[j]) else f"{found.cap_mm_s[j]:.4f}"
+        click.echo(f"  {j:>3} {curves:>11} {found.u[j]:>12.8f} "
+                   f"{np.degrees(found.turn_rad[j]):>10.6f} {found.kappa_jump_1_mm[j]:>12.6g} "
+                   f"{cap:>10} {speed_mm_s[j]:>10.4f}")
 
 
 def _echo_segments(p: Plan, unit: str) -> None:

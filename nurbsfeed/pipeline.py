@@ -1,4 +1,8 @@
-"""read -> plan -> interpolate -> write for one input file. No printing: callers get reports.
+"""read -> chain -> plan -> interpolate -> write for one input file. No printing: callers get
+reports.
+
+Curves that join are gathered into chains (chains.chain_items) and each chain is merged into one
+curve (planning.chain) and converted as one (`convert_window`); a curve alone is a chain of one.
 
 The program is streamed item by item: the reader (readers/) reads the input as the items are
 taken, pass-through lines are copied as bytes, each curve block is planned, then stepped and
@@ -20,12 +24,14 @@ from typing import BinaryIO
 
 import numpy as np
 
+from nurbsfeed.chains import ChainWindow, chain_items
 from nurbsfeed.errors import CurveError, InputError, Location
 from nurbsfeed.files import ENCODING, ERRORS, atomic_output
 from nurbsfeed.gcode.profile_record import record_lines
 from nurbsfeed.gcode.writer import (
     ZERO_LENGTH_COMMENT,
     MoveWriter,
+    chain_comment,
     comment_line,
     cycle_comment,
     rapid_line,
@@ -33,6 +39,7 @@ from nurbsfeed.gcode.writer import (
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.interpolate import PointChunk, Stepping
 from nurbsfeed.machine import FLOOR_MARGIN, Machine
+from nurbsfeed.planning.chain import Chain, Joints, chain_feed, joint_feed, joints, merge_curves
 from nurbsfeed.planning.limits import Limits
 from nurbsfeed.planning.planner import Plan, plan_curve
 from nurbsfeed.program import CurveBlock, PassThrough, ProgramItem
@@ -248,17 +255,25 @@ class RestMoves:
 
 
 def write_trace_rows(out: BinaryIO, curve_index: int, chunk: PointChunk, period_s: float,
-                     s_mm: float, curve: NurbsCurve) -> float:
-    """Trace rows (design §5) of one chunk of points at full precision, u in the input's own
-    knot range (curve.input_u); s_mm: the arc at the point before the chunk (0 before the
-    first). Returns the arc at its last point."""
+                     s_mm: float, chain: Chain) -> float:
+    """Trace rows (design §5) of one chunk of points at full precision; s_mm: the arc at the
+    point before the chunk (0 before the first). Across a chain (design §3b) k, t and s run on
+    from the chain's start and each row names the curve its point lies in (curve_index is the
+    chain's first), with u in that curve's own knot range (`NurbsCurve.input_u`). Returns the
+    arc at its last point."""
     n = chunk.u.size
     s = np.cumsum(np.concatenate(([s_mm], chunk.ds_mm)))[1:]
     v, a, j = chunk.kinematics()
-    table = np.column_stack([np.full(n, curve_index), np.arange(chunk.k0, chunk.k0 + n),
+    piece = chain.piece_of(chunk.u)
+    u_input = np.empty(n)
+    for p in np.unique(piece):
+        at = piece == p
+        curve = chain.pieces[p]
+        u_input[at] = curve.input_u(chain.piece_u(chunk.u[at], piece[at])
+                                    if len(chain.pieces) > 1 else chunk.u[at])
+    table = np.column_stack([curve_index + piece, np.arange(chunk.k0, chunk.k0 + n),
                              np.arange(chunk.k0, chunk.k0 + n, dtype=float) * period_s,
-                             curve.input_u(chunk.u),
-                             s, v, a, j, chunk.points])
+                             u_input, s, v, a, j, chunk.points])
     # the rows as np.savetxt writes them, which builds a class per call: garbage that only the
     # cyclic collector frees, a call per chunk
     for row in table:
@@ -269,31 +284,108 @@ def write_trace_rows(out: BinaryIO, curve_index: int, chunk: PointChunk, period_
 def convert_stream(items: Iterator[ProgramItem], out: BinaryIO, machine: Machine, method: str,
                    report: FileReport, trace: BinaryIO | None = None,
                    on_curve: Callable[[CurveResult], None] | None = None) -> None:
-    """Write the converted program for `items` to `out`; fill `report` curve by curve."""
+    """Write the converted program for `items` to `out`; fill `report` curve by curve. Curves
+    that join are converted as chains (chains.chain_items, design §3b)."""
     index = 0
-    for item in items:
+    for item in chain_items(items, machine):
         if isinstance(item, PassThrough):
             out.write(item.text.encode(ENCODING, ERRORS))
             continue
-        result = convert_block(item, index, out, machine, method, trace)
-        report.curves.append(result)
-        if on_curve is not None:
-            on_curve(result)
-        index += 1
+        for result in convert_window(item, index, out, machine, method, trace):
+            report.curves.append(result)
+            if on_curve is not None:
+                on_curve(result)
+            index += 1
 
 
 def convert_block(block: CurveBlock, index: int, out: BinaryIO, machine: Machine, method: str,
                   trace: BinaryIO | None) -> CurveResult:
-    """Replace one curve block by its comment line and G1 moves.
+    """Replace one curve block, alone (a chain of one), by its comment line and G1 moves."""
+    return convert_window(ChainWindow((block.in_mm(),), ()), index, out, machine, method,
+                          trace)[0]
 
-    The curve is stepped chunk by chunk (interpolate.Stepping) and every chunk goes to the
-    writer (and the trace) before the next is stepped: memory does not grow with the curve's
-    duration. A curve the planner refuses is refused before anything of it is written.
-    `block` comes as read, in the program's unit: converted to mm here, once, and written back
-    in its unit by the writer.
+
+def chain_block(window: ChainWindow, lim: Limits) -> tuple[CurveBlock, Chain, Joints]:
+    """The window's curves as one block (planning.chain.merge_curves): the merged curve, the
+    pieces' feeds as one step function with a step down at each joint that the period rule
+    slows (`joint_feed`), the first block's modal state and the last one's F to restore."""
+    blocks = window.blocks
+    if len(blocks) == 1:
+        chain = merge_curves([blocks[0].curve])
+        return blocks[0], chain, joints(chain, lim)
+    names = [b.curve.name for b in blocks if b.curve.name]
+    chain = merge_curves([b.curve for b in blocks], names[0] if names else "")
+    found = joints(chain, lim)
+    feed_u, feed_mm_s = chain_feed(chain, [(b.feed_u, b.feed_mm_s) for b in blocks])
+    feed_u, feed_mm_s = joint_feed(chain, found.cap_mm_s, feed_u, feed_mm_s)
+    for arr in (feed_u, feed_mm_s):
+        arr.setflags(write=False)
+    block = dataclasses.replace(blocks[0], curve=chain.curve, feed_u=feed_u, feed_mm_s=feed_mm_s,
+                                feed_word_after=blocks[-1].feed_word_after)
+    return block, chain, found
+
+
+class _JointLines:
+    """Hands points to the writer and, where the motion crosses a joint, writes the lines read
+    there, in place (design §3b): after the last point at or before the joint. `crossings`
+    (J,): the count of points handed on (the chain's first point not counted) after which
+    each joint's lines come; a joint whose count is not known yet is None."""
+
+    def __init__(self, writer: MoveWriter | None, out: BinaryIO,
+                 between: tuple[tuple[PassThrough, ...], ...]) -> None:
+        self.writer = writer
+        self.out = out
+        self.between = between
+        self.crossings: list[int] = []
+        self.given = 0
+        self.written = 0  # joints whose lines are written
+
+    def add(self, points: np.ndarray) -> None:
+        while (self.written < len(self.crossings)
+               and self.crossings[self.written] <= self.given + len(points)):
+            cut = self.crossings[self.written] - self.given
+            self._give(points[:cut])
+            points = points[cut:]
+            self._lines(self.written)
+            self.written += 1
+        self._give(points)
+
+    def finish(self) -> None:
+        while self.written < len(self.between):  # joints at the very end (none: a safeguard)
+            self._lines(self.written)
+            self.written += 1
+
+    def _give(self, points: np.ndarray) -> None:
+        if len(points) and self.writer is not None:
+            self.writer.add_points(points)
+        self.given += len(points)
+
+    def _lines(self, joint: int) -> None:
+        lines = self.between[joint]
+        if not lines:
+            return
+        if self.writer is not None:
+            self.writer.end_curve()
+        self.out.write(b"".join(line.text.encode(ENCODING, ERRORS) for line in lines))
+        if self.writer is not None and any(line.words for line in lines):
+            self.writer.after_lines()
+
+
+def convert_window(window: ChainWindow, index: int, out: BinaryIO, machine: Machine,
+                   method: str, trace: BinaryIO | None) -> list[CurveResult]:
+    """Replace a chain of curve blocks (one or more, in mm) by one comment line and G1 moves,
+    with the lines read between the curves written in place; one result per curve.
+
+    The chain is stepped chunk by chunk (interpolate.Stepping) and every chunk goes to the
+    writer (and the trace) before the next is stepped: memory does not grow with the chain's
+    duration. A chain the planner refuses is refused before anything of it is written.
+    `block` comes in mm, converted once when read, and written back in its unit by the writer.
     """
-    block = block.in_mm()
-    label = f'curve {index} "{block.curve.name}"'
+    block, chain, found = chain_block(window, machine.limits)
+    n_curves = len(window.blocks)
+    last_index = index + n_curves - 1
+    label = (f'curve {index} "{block.curve.name}"' if n_curves == 1
+             else f'curves {index}-{last_index} (a chain) "{block.curve.name}"')
     try:
         plan = plan_block(block, machine, method)
     except CurveError as exc:
@@ -309,8 +401,12 @@ def convert_block(block: CurveBlock, index: int, out: BinaryIO, machine: Machine
     if index == 0:  # the profile record: once, before the first curve's comment line
         out.write(b"".join(comment_line(line, block.semicolon_comments).encode("ascii") + eol
                            for line in record_lines(machine)))
-    comment = cycle_comment(index, block.curve.name, n_points, period_s, method,
-                            plan.cycle_time_s, plan.length_mm, block.units)
+    if n_curves == 1:
+        comment = cycle_comment(index, block.curve.name, n_points, period_s, method,
+                                plan.cycle_time_s, plan.length_mm, block.units)
+    else:
+        comment = chain_comment(index, last_index, block.curve.name, n_points, period_s,
+                                method, plan.cycle_time_s, plan.length_mm, block.units)
     out.write(comment_line(comment, block.semicolon_comments).encode(ENCODING, ERRORS) + eol)
     moving = not block.curve.is_degenerate and plan.n_periods > 0
     writer = None
@@ -322,33 +418,91 @@ def convert_block(block: CurveBlock, index: int, out: BinaryIO, machine: Machine
             out.write(b"G90" + eol)
         writer = MoveWriter(out, machine.decimals, machine.feed_decimals, period_s, block.eol,
                             block.curve.points[0], block.units)
+    lines = _JointLines(writer, out, window.between)
     periods = rest_move_periods(machine)
     rest = RestMoves(block.curve, plan.limits.chord_mm, periods) if periods > 1 else None
     s_mm = 0.0
+    # per curve: the point index (from the chain's start) of its last point, and the moves
+    # written up to it
+    last_k: list[int] = []
+    joint_u = chain.joint_u
     for chunk in Stepping(plan, method).chunks():
         try:
             guard.check(chunk.points)
         except CurveError as exc:
             raise exc.at(block.location) from None
-        if writer is not None:
-            if rest is not None:
-                writer.add_points(rest.take(chunk))
-            elif chunk.stretch is not None:  # not the first point: the start
-                writer.add_points(chunk.points)
+        while len(last_k) < joint_u.size and chunk.u[-1] > joint_u[len(last_k)]:
+            before = int(np.searchsorted(chunk.u, joint_u[len(last_k)], side="right"))
+            last_k.append(chunk.k0 + before - 1)
+            lines.crossings.append(chunk.k0 + before - 1)
+        if rest is not None:
+            lines.add(rest.take(chunk))
+        elif chunk.stretch is not None:  # not the first point: the start
+            lines.add(chunk.points)
         if trace is not None:
-            s_mm = write_trace_rows(trace, index, chunk, period_s, s_mm, block.curve)
+            s_mm = write_trace_rows(trace, index, chunk, period_s, s_mm, chain)
+    if rest is not None:
+        lines.add(rest.finish())
+    while len(last_k) < joint_u.size:  # a joint at the chain's end: no length after it
+        last_k.append(plan.n_periods)
+        lines.crossings.append(plan.n_periods)
+    lines.add(np.empty((0, 3)))
+    lines.finish()
     moves = 0
     if writer is not None:
-        if rest is not None:
-            writer.add_points(rest.finish())
         writer.end_curve()
         moves = writer.moves
         if block.incremental:
             out.write(b"G91" + eol)
         if block.feed_word_after:
             out.write(block.feed_word_after.encode(ENCODING, ERRORS) + eol)
-    return CurveResult(index, block.curve.name, block.location, n_points, moves,
-                       plan.length_mm, plan.cycle_time_s, block.units)
+    return _curve_results(window, index, plan, chain, last_k, moves)
+
+
+def _curve_results(window: ChainWindow, index: int, plan: Plan, chain: Chain,
+                   last_k: list[int], moves: int) -> list[CurveResult]:
+    """One result per curve of a converted chain: its points and cycle from where the motion
+    crossed its joints, its length from the planner's arc (the moves are counted for the chain
+    as a whole, on its last curve)."""
+    if len(window.blocks) == 1:
+        b = window.blocks[0]
+        return [CurveResult(index, b.curve.name, b.location, 1 + plan.n_periods, moves,
+                            plan.length_mm, plan.cycle_time_s, b.units)]
+    ends_k = [*last_k, plan.n_periods]
+    grid = plan.grid
+    ends_s = [*np.interp(chain.joint_u, grid.u, grid.s_mm).tolist(), plan.length_mm]
+    results = []
+    k_before, s_before = 0, 0.0
+    for i, b in enumerate(window.blocks):
+        periods = ends_k[i] - k_before
+        results.append(CurveResult(index + i, b.curve.name, b.location,
+                                   periods + (1 if i == 0 else 0),
+                                   moves if i == len(window.blocks) - 1 else 0,
+                                   ends_s[i] - s_before, periods * plan.limits.period_s,
+                                   b.units))
+        k_before, s_before = ends_k[i], ends_s[i]
+    return results
+
+
+def joint_speeds(plan: Plan, chain: Chain, method: str = "rk2c") -> np.ndarray:
+    """The speed (J,) at which the stepped points of a chain's plan cross each joint: the chord
+    from the last point at or before the joint to the first after it, over one period (0 where
+    the motion rests on the joint)."""
+    joint_u = chain.joint_u
+    speeds = np.zeros(joint_u.size)
+    found = 0
+    last_u, last_point = -np.inf, np.zeros(3)
+    for chunk in Stepping(plan, method).chunks():
+        u = np.concatenate(([last_u], chunk.u))
+        points = np.concatenate((last_point[None, :], chunk.points))
+        while found < joint_u.size and u[-1] > joint_u[found]:
+            after = int(np.searchsorted(u, joint_u[found], side="right"))
+            if u[after - 1] != joint_u[found]:  # else a point rests on the joint: 0
+                step = points[after] - points[after - 1]
+                speeds[found] = float(np.linalg.norm(step)) / plan.limits.period_s
+            found += 1
+        last_u, last_point = float(u[-1]), points[-1]
+    return speeds
 
 
 def convert_file(source: Path, target: Path | None, machine: Machine, method: str = "rk2c",

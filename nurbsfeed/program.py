@@ -21,9 +21,18 @@ MM_PER_UNIT = {"mm": 1.0, "in": MM_PER_INCH}  # G21, G20
 
 @dataclass(frozen=True)
 class PassThrough:
-    """One source line, exactly as read (decoded with surrogateescape, line ending included)."""
+    """One source line, exactly as read (decoded with surrogateescape, line ending included).
+
+    joins: the line changes no motion state, so a chain of curves runs on across it (design
+    §3b): a comment, blank or N-only line, or words that leave the position, units, plane,
+    distance mode, feed mode and cutter compensation as they were (a zero-length G0 / G1, a
+    repeated G90, a new F). words: it carries words the controller executes (a written G0 / G1
+    or F): the moves written after it repeat their G1 and F.
+    """
 
     text: str
+    joins: bool = field(default=False, compare=False)  # (the line is its text: equal texts are
+    words: bool = field(default=False, compare=False)  # equal items)
 
 
 @dataclass(frozen=True, eq=False)

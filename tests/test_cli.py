@@ -409,12 +409,16 @@ def _under_a_terminal(*args: str) -> tuple[int, str]:
 def planned_points_and_cycle(source: Path) -> tuple[int, float]:
     """The points and cycle a conversion of source under the default profile writes, from
     the plans of its curves."""
-    from nurbsfeed.analysis.common import curve_blocks
+    from nurbsfeed.chains import ChainWindow, chain_items
     from nurbsfeed.machine import load_machine
-    from nurbsfeed.pipeline import plan_block
+    from nurbsfeed.pipeline import chain_block, plan_block
+    from nurbsfeed.readers import read_program
 
     machine = load_machine("default")
-    plans = [plan_block(block, machine) for block in curve_blocks(source)]
+    # curves that join are planned as one chain (design §3b)
+    plans = [plan_block(chain_block(item, machine.limits)[0], machine)
+             for item in chain_items(read_program(source), machine)
+             if isinstance(item, ChainWindow)]
     return (sum(plan.n_periods + 1 for plan in plans),
             sum(plan.cycle_time_s for plan in plans))
 

@@ -334,11 +334,18 @@ class MoveWriter:
         self.held_count = len(points) - first_held
 
     def end_curve(self) -> None:
-        """Write the held run onto the end as one move spanning all its periods."""
+        """Write the held run onto the end as one move spanning all its periods (at a joint of
+        a chain, before the lines written there: the points after continue from it)."""
         if self.held_count:
             self.state[_PENDING] += self.held_count - 1  # held where the point before is
             self.write(self.held_point[None, :])
         self.held_count = 0
+
+    def after_lines(self) -> None:
+        """Lines that execute words (a G0, an F) were written between the moves (a chain's
+        joint, design §3b): the next move writes its G1 and F again."""
+        self.state[_FIRST] = 1
+        self.state[_FEED] = -1
 
     def _release(self) -> None:
         """Write the held run as the points it stands for (see `add_points`)."""
@@ -396,6 +403,15 @@ def cycle_comment(curve_index: int, name: str, n_points: int, period_s: float, m
             f"{period_s * 1e3:g} ms, {method}, length {length_mm / MM_PER_UNIT[units]:.3f} "
             f"{units}, "
             f"planned cycle {cycle_s:.3f} s)")
+
+
+def chain_comment(first_index: int, last_index: int, name: str, n_points: int, period_s: float,
+                  method: str, cycle_s: float, length_mm: float, units: str) -> str:
+    """The comment line written before a chain of curves (design §3b): `cycle_comment` naming
+    the chain's curves."""
+    return cycle_comment(first_index, name, n_points, period_s, method, cycle_s, length_mm,
+                         units).replace(f"curve {first_index} ",
+                                        f"curves {first_index}-{last_index} chained, ", 1)
 
 
 def comment_line(text: str, semicolon: bool) -> str:

@@ -61,6 +61,7 @@ from nurbsfeed.gcode.modal import (
     PROBES,
     SPLINES,
     ModalState,
+    tolerance,
 )
 from nurbsfeed.gcode.nurbs_block import FinishedCurve, first_word, motion_words
 from nurbsfeed.gcode.siemens import BSPLINE, SUFFIXES, BsplineReader, tokenize_siemens_line
@@ -185,11 +186,38 @@ class _Reader:
             self._check_after_spline(block)
             if self.dialect == "siemens":
                 self._units_word(block)
+            before = (self._motion_state() if self.dialect != "siemens" and _may_join(block)
+                      else None)
             self.state.apply(block)
             self._moved(block)
-            yield PassThrough(line_text)
+            joins = before is not None and self._joins(before)
+            yield PassThrough(line_text, joins, joins and not block.is_inert)
         else:
             self.eol = block.eol or _line_ending(line_text)
+
+    def _motion_state(self) -> tuple[object, ...]:
+        """What a line between two curves of a chain must leave as it was (PassThrough.joins):
+        the position (`_same_place`), units, distance mode, plane, feed mode, cutter
+        compensation, canned cycle."""
+        state = self.state
+        return (state.pos.copy(), state.units, state.incremental, state.plane, state.feed_mode,
+                state.cutter_comp, state.cycle)
+
+    def _joins(self, before: tuple[object, ...]) -> bool:
+        """Whether the line just executed left the motion state `before` as it was: each axis
+        at the same point to the resolution both were written with (modal.tolerance: a G1 to
+        the point reached, written to fewer decimals, is still that point)."""
+        after = self._motion_state()
+        if after[1:] != before[1:]:
+            return False
+        units = self.state.units
+        for axis in AXES:
+            was, now = before[0][axis], after[0][axis]  # type: ignore[index]
+            if was.value is None or now.value is None:
+                return False
+            if abs(now.value - was.value) > tolerance(units, was.decimals, now.decimals):
+                return False
+        return True
 
     def _units_word(self, block: Block) -> None:
         """Sinumerik G70 (inch, F in the machine's unit) until G700 / G71 / G710."""
@@ -264,7 +292,7 @@ class _Reader:
         assert self.open is not None, "called when a block completes"
         finished = self.open.finish()
         if self.kept:
-            yield PassThrough("".join(self.kept))
+            yield PassThrough("".join(self.kept), joins=True)
             self.kept = []
         yield self._curve_block(finished)
         self.open = None
@@ -364,6 +392,22 @@ class _LookAhead:
             self.ahead[0] = line
         else:
             self.ahead.popleft()
+
+
+# G codes a line between two curves of a chain may carry (PassThrough.joins): G0 / G1 (a move,
+# which must then have no length) and modal words that may repeat what is in force
+JOINING_G = {0, 10, 170, 180, 190, 200, 210, 400, 900, 910, 940}
+JOINING_LETTERS = {"N", "F", "G", *AXES}
+
+
+def _may_join(block: Block) -> bool:
+    """Whether the block's words alone allow a chain to run on across it: no parameter
+    assignment, block delete or '%', and only N, F, X, Y, Z and the G codes of JOINING_G (an M,
+    S, T, a dwell, an offset change end a chain whatever they do)."""
+    if block.assignments or block.block_delete or block.delimiter:
+        return False
+    return all(word.letter in JOINING_LETTERS
+               and (word.letter != "G" or word.code in JOINING_G) for word in block.words)
 
 
 def _code_part(line_text: str) -> str:

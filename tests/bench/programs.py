@@ -74,6 +74,40 @@ def fanuc_program(n_curves: int, seed: int = 1) -> str:
     return "\n".join(lines) + "\n"
 
 
+CHAIN_STEP_MM = 3.0  # control point spacing of the chained program's path
+CHAIN_TURN_RAD = 0.05  # its heading change per control point, normal: gentle, no corner
+
+
+def chained_program(n_curves: int, seed: int = 1) -> str:
+    """One smooth path as n_curves G06.2 curves that join end to start, tangent and
+    curvature-continuous (design §3b): the Bézier spans of a uniform cubic B-spline whose
+    control points are CHAIN_STEP_MM apart along a gently turning heading, each span written as
+    a curve of its own (4 control points, knots 0 and 1), with an N-numbered comment line
+    between them. A chain the planner plans in windows, never stopping inside one."""
+    rng = np.random.default_rng(seed)
+    headings = np.cumsum(rng.normal(0.0, CHAIN_TURN_RAD, n_curves + 2))
+    steps = CHAIN_STEP_MM * np.column_stack([np.cos(headings), np.sin(headings)])
+    q = np.vstack([np.zeros(2), np.cumsum(steps, axis=0)])  # (n_curves + 3, 2)
+    q0, q1, q2, q3 = q[:-3], q[1:-2], q[2:-1], q[3:]
+    # each span of a uniform cubic B-spline as a Bézier curve (its control points in closed
+    # form); rounded once, the end of one span and the start of the next are the same text
+    bez = np.stack([(q0 + 4 * q1 + q2) / 6, (2 * q1 + q2) / 3, (q1 + 2 * q2) / 3,
+                    (q1 + 4 * q2 + q3) / 6], axis=1).round(6)
+    bez[1:, 0] = bez[:-1, 3]
+    lines = ["%", "O1235 (CHAINED BENCHMARK)", "G17 G21 G90 G94", "S12000 M3",
+             f"G0 X{bez[0, 0, 0]:.6f} Y{bez[0, 0, 1]:.6f} Z0."]
+    for i, span in enumerate(bez):
+        if i:
+            lines.append(f"N{i} (span {i})")
+        for j, (x, y) in enumerate(span):
+            head = "G06.2 P4 " if j == 0 else ""
+            feed = " Z0. R1. F6000." if j == 0 else ""
+            lines.append(f"{head}K0. X{x:.6f} Y{y:.6f}{feed}")
+        lines += ["K1."] * 4
+    lines += ["M5", "M30", "%"]
+    return "\n".join(lines) + "\n"
+
+
 def write_pass_through_program(path: Path, size_mb: int, n_curves: int = 3,
                                seed: int = 1) -> None:
     """A program of `size_mb` MB that is nearly all lines nurbsfeed passes through (G1 moves

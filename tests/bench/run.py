@@ -7,8 +7,9 @@
 1. Stepping kernels: microseconds per step for each method on the butterfly with paper-table1
    (the compiled kernel alone, median of repeated runs after a warm-up).
 2. End to end: `nurbsfeed convert` on generated Fanuc G06.2 programs of hundreds of butterfly-sized
-   curves (tests/bench/programs.py) under the default profile, and the larger one again under
-   its limits with the paper model (what the path model's planning costs), pinned to one core,
+   curves (tests/bench/programs.py) under the default profile, the larger one again under
+   its limits with the paper model (what the path model's planning costs), and a program of
+   CHAINED_CURVES curves that join into one smooth path (planned as chains), pinned to one core,
    after a warm-up conversion that fills the numba cache; output points per second (start-up,
    reading, planning, interpolation and writing included) of the median of END_TO_END_RUNS runs
    with the range over all of them, its wall time, and the highest peak RSS of the children,
@@ -43,7 +44,7 @@ from nurbsfeed.interpolate import METHODS, SLOW_SPEED_REL, step_spans
 from nurbsfeed.machine import load_machine
 from nurbsfeed.planning.planner import plan_curve
 from nurbsfeed.readers.json_curves import read_json_curves
-from tests.bench.programs import fanuc_program, write_pass_through_program
+from tests.bench.programs import chained_program, fanuc_program, write_pass_through_program
 from tests.conftest import default_paper_profile, law_increments
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -53,6 +54,7 @@ PHASE_RUNS = 5
 PHASE_SAMPLES = ("quarter-circle.json", "circle.json", "butterfly.json",
                  "fanuc-multi-curve.nc", "linuxcnc-nurbs-xy.ngc")
 PASS_THROUGH_MB = 200
+CHAINED_CURVES = 10_000
 
 
 def kernel_us_per_step() -> dict[str, float]:
@@ -137,12 +139,13 @@ def phases() -> list[tuple[str, int, float, float, float]]:
 
 
 def end_to_end(n_curves: int, folder: Path, profile: Path | None = None,
-               runs: int = END_TO_END_RUNS) -> dict[str, float]:
+               runs: int = END_TO_END_RUNS, chained: bool = False) -> dict[str, float]:
     """END_TO_END_RUNS conversions of an n-curve program (numba cache warm) under the default
     profile or the one given: the median run, and the points per second of the slowest and the
-    fastest."""
-    src = folder / f"program-{n_curves}.nc"
-    src.write_text(fanuc_program(n_curves))
+    fastest. chained: the program is one smooth path cut into n curves that join
+    (programs.chained_program), planned as chains."""
+    src = folder / f"program-{n_curves}{'-chained' if chained else ''}.nc"
+    src.write_text(chained_program(n_curves) if chained else fanuc_program(n_curves))
     out = folder / f"out-{n_curves}.nc"
     machine = ["-m", str(profile)] if profile else []
     done = sorted((run_convert([str(src), "-o", str(out), "-q", *machine])
@@ -156,7 +159,8 @@ def end_to_end(n_curves: int, folder: Path, profile: Path | None = None,
     out_mb = out.stat().st_size / 1e6
     out.unlink()
     return {"curves": n_curves, "points": points, "wall_s": wall, "points_per_s": points / wall,
-            "model": " under the paper model" if profile else "",
+            "model": (" under the paper model" if profile else "")
+            + (" chained, one smooth path" if chained else ""),
             "slowest": points / done[-1][0], "fastest": points / done[0][0],
             "rss_mb": max(run[1] for run in done) / 1024, "output_mb": out_mb, "runs": runs}
 
@@ -207,6 +211,9 @@ def main() -> None:
         paper = folder / "default-paper.yaml"
         paper.write_text(yaml.safe_dump(default_paper_profile()))
         runs.append(end_to_end(sizes[-1], folder, paper, args.runs))
+        # a long chain: windows of look-ahead, memory bounded by the window, not the chain
+        runs.append(end_to_end(CHAINED_CURVES // 10 if quick else CHAINED_CURVES, folder,
+                               runs=args.runs, chained=True))
         reading = pass_through(PASS_THROUGH_MB // 10 if quick else PASS_THROUGH_MB, folder)
         cold = cold_start(folder)
     print("| benchmark | result |")

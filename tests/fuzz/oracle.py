@@ -33,7 +33,10 @@ from nurbsfeed.cli import main
 TIME_LIMIT_S = 10.0
 CHECK_TIME_LIMIT_S = 60.0  # `check` of a slow inch curve (70,000 moves) takes seconds
 # nurbsfeed's comment lines, in parentheses or, in a Sinumerik program, after ';'
-CURVE_COMMENT = (b"(nurbsfeed: curve ", b"; nurbsfeed: curve ")
+CURVE_COMMENT = (b"(nurbsfeed: curve ", b"; nurbsfeed: curve ",
+                 b"(nurbsfeed: curves ", b"; nurbsfeed: curves ")
+# a chain's comment (design §3b): the lines read between its curves come among its moves
+CHAIN_COMMENT = re.compile(rb"(?:\(|; )nurbsfeed: curves \d+-\d+ chained,")
 # the profile record (gcode.profile_record), in either form
 PROFILE_RECORD = (b"(nurbsfeed profile: ", b"; nurbsfeed profile: ")
 ZERO_LENGTH = (b"(nurbsfeed: zero-length curve, no move written)",
@@ -157,9 +160,11 @@ def pass_through_problem(source: bytes, output: bytes) -> str | None:
         src[0] = src[0][3:]
         out[0] = out[0][3:]
     segments: list[list[bytes]] = [[]]
+    chains = [False]
     for line in out:
         if line.startswith(CURVE_COMMENT):
             segments.append([])
+            chains.append(bool(CHAIN_COMMENT.match(line)))
         else:
             segments[-1].append(line)
     # the profile record: nurbsfeed's own lines just before the first curve's comment
@@ -169,6 +174,14 @@ def pass_through_problem(source: bytes, output: bytes) -> str | None:
     if at is None:
         return _first_mismatch(segments[0], src, 0)
     known = set(src)
+    # in a chain the moves run on after the lines of each joint: generated lines that are not
+    # the input's are taken off wherever they are, up to the last one
+    for i, chain in enumerate(chains):
+        if chain:
+            last = max((k for k, line in enumerate(segments[i])
+                        if _generated(line) and line not in known), default=-1)
+            segments[i] = [line for k, line in enumerate(segments[i])
+                           if k > last or not (_generated(line) and line not in known)]
     choices = []  # per block: how many of its segment's first lines may be generated
     for segment in segments[1:]:
         longest = 0

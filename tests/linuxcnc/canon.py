@@ -20,7 +20,7 @@ from tests.linuxcnc.programs import WrittenCurve
 
 PRINTED_DECIMALS = 4
 CANON_LINE = re.compile(r"^\s*\d+\s+(N\S*)\s+([A-Z0-9_]+)\((.*)\)\s*$")
-CURVE_COMMENT = re.compile(r"nurbsfeed: curve .*?, (\d+) points, period ([\d.]+) ms, "
+CURVE_COMMENT = re.compile(r"nurbsfeed: curves? .*?, (\d+) points, period ([\d.]+) ms, "
                            r".*planned cycle ([\d.]+) s")
 
 

@@ -18,15 +18,20 @@ move before or after a curve into it, and a curve entered or left in motion show
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from nurbsfeed.analysis.check.projection import project_points
+from nurbsfeed.chains import ChainWindow, chain_items
+from nurbsfeed.geometry import NurbsCurve
+from nurbsfeed.machine import load_machine
+from nurbsfeed.pipeline import chain_block
 from nurbsfeed.program import MM_PER_INCH, CurveBlock
 from nurbsfeed.readers import read_program
-from tests.linuxcnc.programs import WrittenCurve, written_curves
+from tests.linuxcnc.programs import LINUXCNC_PROFILE, WrittenCurve, written_curves
 from tests.linuxcnc.run_sim import SERVO_PERIOD_S
 
 ARRIVAL_MM = 0.01  # a sample this near the curve start: the machine has arrived there
@@ -62,8 +67,21 @@ class CurveRun:
 
 
 def curve_blocks(source: Path) -> list[CurveBlock]:
-    """The curves of `source` as read, in the program's unit (the written moves' unit)."""
-    return [item for item in read_program(source) if isinstance(item, CurveBlock)]
+    """The curves of `source` as converted, in the program's unit (the written moves' unit):
+    curves that join as one chain (design §3b; gathered as the linuxcnc profile's output
+    decimals gather them), each chain one block."""
+    machine = load_machine(LINUXCNC_PROFILE)
+    blocks = []
+    for item in chain_items(read_program(source), machine):
+        if isinstance(item, ChainWindow):
+            block = chain_block(item, machine.limits)[0]
+            curve = block.curve
+            if block.units == "in":  # chain_block works in mm
+                points = curve.points / MM_PER_INCH
+                curve = NurbsCurve(curve.degree, curve.knots, points, curve.weights,
+                                   curve.name, curve.u_origin, curve.u_scale)
+            blocks.append(dataclasses.replace(block, curve=curve))
+    return blocks
 
 
 def measure(source: Path, program: Path, samples_mm: np.ndarray) -> list[CurveRun]:

@@ -21,8 +21,9 @@ from nurbsfeed.pipeline import convert_file
 from tests.conftest import SAMPLES
 
 FANUC_ONLY_LINE = re.compile(r"^N\d+\s+G0?5(\.1)?\s+[PQ]\d+\s*$")
-CURVE_COMMENT = re.compile(r"^\(nurbsfeed: curve ")
+CURVE_COMMENT = re.compile(r"^\(nurbsfeed: curves? ")  # a curve, or a chain (design §3b)
 MOVE_LINE = re.compile(r"^(G1 )?(?=[XYZF])")
+COMMENT_LINE = re.compile(r"\([^)]*\)")
 WORD = re.compile(r"([XYZF])(-?\d*\.?\d*)")
 
 
@@ -73,7 +74,12 @@ def written_curves(text: str) -> list[WrittenCurve]:
         position = np.full(3, np.nan)
         feed = np.nan
         ends, feeds, decimals = [], [], 0
-        while i < len(lines) and MOVE_LINE.match(lines[i]):
+        while i < len(lines) and (MOVE_LINE.match(lines[i]) or (
+                COMMENT_LINE.fullmatch(lines[i]) and not CURVE_COMMENT.match(lines[i])
+                and i + 1 < len(lines) and MOVE_LINE.match(lines[i + 1]))):
+            if not MOVE_LINE.match(lines[i]):  # a comment between a chain's curves
+                i += 1
+                continue
             words = WORD.findall(lines[i])
             for axis, value in words:
                 if axis == "F":

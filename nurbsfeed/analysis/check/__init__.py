@@ -38,10 +38,11 @@ def check_files(source: Path, output: Path, machine: Machine,
                 dialect: str = "auto") -> CheckReport:
     """Check the converted program `output` against `source`."""
     # both programs split into lines as a conversion reads them (a CR-only file too)
-    src_tokens, blocks, following = source_tokens(source, machine, dialect)
+    src_tokens, blocks, following, joint_lines = source_tokens(source, machine, dialect)
     out_lines = list(InputFile(output).lines())
     findings = Findings(str(output))
-    out_tokens, token_lines, sections = parse_output(out_lines, blocks, following, findings)
+    out_tokens, token_lines, sections = parse_output(out_lines, blocks, following, findings,
+                                                    joint_lines)
     compare_structure(src_tokens, out_tokens, token_lines, blocks, len(out_lines), findings)
     for section in sections:
         if section.index < len(blocks):

@@ -11,15 +11,18 @@ from typing import Any
 import numpy as np
 
 from nurbsfeed.analysis.check.report import Findings
+from nurbsfeed.chains import ChainWindow, chain_items
 from nurbsfeed.files import InputFile
 from nurbsfeed.gcode.profile_record import RECORD_START, SEMICOLON_START
 from nurbsfeed.gcode.writer import ZERO_LENGTH_COMMENT, rapid_line
 from nurbsfeed.machine import Machine
+from nurbsfeed.pipeline import chain_block
 from nurbsfeed.program import CurveBlock, PassThrough
 from nurbsfeed.readers import read_program
 
-COMMENT_RE = re.compile(r"\(nurbsfeed: curve (\d+) (.*), (\d+) points, period ([0-9.eE+-]+) ms, "
-                        r"(\w+), length ([0-9.]+) (mm|in), planned cycle ([0-9.]+) s\)$")
+COMMENT_RE = re.compile(r"\(nurbsfeed: curves? (\d+)(?:-\d+ chained,)? (.*), (\d+) points, "
+                        r"period ([0-9.eE+-]+) ms, (\w+), length ([0-9.]+) (mm|in), "
+                        r"planned cycle ([0-9.]+) s\)$")
 ZERO_LENGTH_LINE = ZERO_LENGTH_COMMENT  # pipeline.convert_block
 MOVE_LINE_RE = re.compile(r"(?:G0*1(?![0-9.])\s*)?(?:[XYZF]\s*[-+]?[0-9.]*\s*)+")
 WORD_RE = re.compile(r"([A-Z])\s*([-+]?[0-9.]*)")
@@ -59,36 +62,55 @@ def body(line: str) -> str:
 
 
 def source_tokens(path: Path, machine: Machine, dialect: str
-                  ) -> tuple[list[Token], list[CurveBlock], dict[int, list[str]]]:
-    """Source -> tokens, curve blocks (in mm), and the pass-through lines that follow each curve
-    (the G0 the writer puts before a JSON curve reads as one, in its place)."""
+                  ) -> tuple[list[Token], list[CurveBlock], dict[int, list[str]],
+                             dict[int, list[list[str]]]]:
+    """Source -> tokens, curve blocks (in mm), the pass-through lines that follow each curve
+    (the G0 the writer puts before a JSON curve reads as one, in its place), and the lines at
+    each joint of a chain.
+
+    Curves that join are gathered as the conversion gathers them (chains.chain_items, design
+    §3b): a chain is one token and one section, its first curve's index, and every one of its
+    curves has the chain's merged block (in mm) as its block; the lines read between its curves
+    are expected inside its section, at the joints, in order."""
     tokens: list[Token] = []
     blocks: list[CurveBlock] = []
     following: dict[int, list[str]] = {}
+    joint_lines: dict[int, list[list[str]]] = {}
+    section = -1
     # a pass-through item is a line of the source, or several (the inert lines inside a block):
     # split as the reader split them (the lines the JSON reader writes hold no "\r")
     source = InputFile(path)
     ending = "\r" if source.cr_only else "\n"
-    for item in read_program(source, dialect):
-        if isinstance(item, PassThrough) or item.rapid_to_start:
+    for item in chain_items(read_program(source, dialect), machine):
+        block = None if isinstance(item, PassThrough) else item.blocks[0]
+        if isinstance(item, PassThrough) or (block is not None and block.rapid_to_start):
             text = item.text if isinstance(item, PassThrough) else rapid_line(
-                item.in_mm().curve.points[0], machine.decimals, item.units) + item.eol
+                item.blocks[0].curve.points[0], machine.decimals, item.blocks[0].units) + \
+                item.blocks[0].eol
             for line in split_lines(text, ending):
                 tokens.append(("line", line))
-                if blocks:
-                    following[len(blocks) - 1].append(line)
-        if isinstance(item, CurveBlock):
-            tokens.append(("curve", len(blocks)))
-            following[len(blocks)] = []
-            blocks.append(item.in_mm())
-    return tokens, blocks, following
+                if section >= 0:
+                    following[section].append(line)
+        if isinstance(item, ChainWindow):
+            section = len(blocks)
+            tokens.append(("curve", section))
+            following[section] = []
+            merged = chain_block(item, machine.limits)[0] if len(item.blocks) > 1 else block
+            assert merged is not None, "a window has a first block"
+            blocks.extend([merged] * len(item.blocks))
+            joint_lines[section] = [[line for passed in at for line in split_lines(passed.text,
+                                                                                   ending)]
+                                    for at in item.between]
+    return tokens, blocks, following, joint_lines
 
 
 def parse_output(lines: list[str], blocks: list[CurveBlock], following: dict[int, list[str]],
-                 findings: Findings) -> tuple[list[Token], list[int], list[Section]]:
+                 findings: Findings, joint_lines: dict[int, list[list[str]]] | None = None
+                 ) -> tuple[list[Token], list[int], list[Section]]:
     """Output lines -> tokens, their line numbers, and the curve sections. A section is a
-    nurbsfeed comment line and the moves after it. The profile record's lines before the first
-    section are nurbsfeed's, not the source's (the CLI reads them)."""
+    nurbsfeed comment line and the moves after it (a chain's: with the lines of its joints
+    among them). The profile record's lines before the first section are nurbsfeed's, not the
+    source's (the CLI reads them)."""
     tokens: list[Token] = []
     token_lines: list[int] = []
     sections: list[Section] = []
@@ -113,13 +135,15 @@ def parse_output(lines: list[str], blocks: list[CurveBlock], following: dict[int
         token_lines.append(i + 1)
         sections.append(section)
         block = blocks[index] if index < len(blocks) else None
-        i = _parse_section(lines, i + 1, section, block, following.get(index, []), findings)
+        i = _parse_section(lines, i + 1, section, block, following.get(index, []), findings,
+                           (joint_lines or {}).get(index, []))
     return tokens, token_lines, sections
 
 
 def _parse_section(lines: list[str], i: int, section: Section, block: CurveBlock | None,
-                   after: list[str], findings: Findings) -> int:
-    """Read the moves of one section from line index i; return the index after the section."""
+                   after: list[str], findings: Findings, joints: list[list[str]]) -> int:
+    """Read the moves of one section from line index i; return the index after the section.
+    joints: the lines expected at each joint of a chain, in order, among the moves."""
     if i < len(lines) and body(lines[i]) == ZERO_LENGTH_LINE:
         section.zero_length = True
         return i + 1
@@ -132,8 +156,24 @@ def _parse_section(lines: list[str], i: int, section: Section, block: CurveBlock
         else:
             findings.add("g90-g91", i + 1, G90_G91_MESSAGE)
     first = i
-    while i < len(lines) and MOVE_LINE_RE.fullmatch(body(lines[i])):
-        i += 1
+    joint = 0
+    at_joints: list[int] = []  # the line indices of the joints' lines, not moves
+    while i < len(lines):
+        while joint < len(joints) and not joints[joint]:
+            joint += 1
+        if joint < len(joints) and lines[i:i + len(joints[joint])] == joints[joint]:
+            at_joints.extend(range(i, i + len(joints[joint])))
+            i += len(joints[joint])
+            joint += 1
+        elif MOVE_LINE_RE.fullmatch(body(lines[i])):
+            i += 1
+        else:
+            break
+    while joint < len(joints) and not joints[joint]:
+        joint += 1
+    if joint < len(joints):
+        findings.add("pass-through", i + 1, f"the lines of joint {joint + 1} of the chain are "
+                     f"missing among its moves: {body(joints[joint][0])!r}")
     if not incremental:
         # a bare F or coordinate line after the block (its F restore, or the program's next
         # lines) looks like a move: give back the trailing lines that are exactly those
@@ -142,7 +182,8 @@ def _parse_section(lines: list[str], i: int, section: Section, block: CurveBlock
             if lines[i - k:i] == expected[:k]:
                 i -= k
                 break
-    section.moves = [(n + 1, lines[n]) for n in range(first, i)]
+    skip = set(at_joints)
+    section.moves = [(n + 1, lines[n]) for n in range(first, i) if n not in skip]
     if incremental:
         if i < len(lines) and body(lines[i]) == "G91":
             i += 1
