@@ -83,7 +83,7 @@ GROWTH = (2.0, 1.5, 1.5, 1.3, 1.3, 1.2, 1.1, 1.05, 1.03, 1.02, 1.01, 1.0)
 INNER_ROUNDS = 60  # cap, slope and curvature passes of the last round, at most
 EARLY_ROUNDS = 10  # ... of the rounds before it, which only shape the terms to freeze
 CONVERGED_REL = 1e-4  # a pass lowering no b by more than this share of it: converged
-FIX_ROUNDS = 8  # rounds that lower the limits where the law exceeds them
+FIX_ROUNDS = 16  # rounds that lower the limits where the law exceeds them
 FIX_REL = 0.01  # ... while it does so by more than this
 FIX_WORST = 1.5  # ... and while their profile lasts less than this times the best plan's
 # a profile whose growth a share of coefficients above this took in full in the last round that
