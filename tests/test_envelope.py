@@ -6,6 +6,7 @@ against the bound each one holds."""
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -231,6 +232,22 @@ def test_the_slowdown_from_points_reads_each_difference_against_its_limit() -> N
         points[:, 0] = 0.5 * acc * t**2
         chunks = [points[:7], points[7:8], points[8:]]  # the differences span the chunks
         assert slowdown_from_points(lim, chunks) == pytest.approx(expected, rel=1e-9)
+
+
+def test_a_stretch_of_one_node_between_two_rests_keeps_the_scurve_plan(tmp_path: Path) -> None:
+    """Fuzz seed 57 (case 870): repeated control points put a single grid node between two
+    rests, whose spline coefficients coincide; the envelope's slope pass divided by their zero
+    distance and the valid program was refused ("internal error", exit 2). Now the envelope
+    gives way to the S-curve plan there: it converts, quietly, and check passes it."""
+    name = "single-node-stretch.nc"
+    out = tmp_path / "out.nc"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no division by zero reaches stderr either
+        convert_file(DATA / name, out, DEFAULT)
+    report = check_files(DATA / name, out, DEFAULT)
+    assert report.ok, "\n".join(map(str, report.violations))
+    planners = {plan_block(block, DEFAULT).planner for block in curve_blocks(DATA / name)}
+    assert "scurve" in planners
 
 
 @pytest.mark.parametrize("name", ["axis-jerk-from-positions-a.ngc",

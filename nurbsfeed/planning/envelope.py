@@ -207,10 +207,10 @@ def envelope_schedule(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np
     ends, corners and cusps. v_start (M,): a speed at the grid's nodes that keeps the limits
     (the S-curve plan's), which sets where cells are cut finer. feed_at_u: parameters (N,) ->
     programmed feed (N,). None where it cannot plan (a profile of b = 0 inside a stretch: a
-    motion that never arrives), where its schedule would last longer than worst_s (the plan
-    it would replace) or MAX_LAW_PERIODS, or on a grid of more than MAX_NODES nodes (each
-    takes about 2.5 kB of rows: a two-hour curve's 200,000 took 750 MB). slowdown: a uniform
-    slowdown on top of the one the law needs."""
+    motion that never arrives; a stretch whose coefficients coincide), where its schedule
+    would last longer than worst_s (the plan it would replace) or MAX_LAW_PERIODS, or on a
+    grid of more than MAX_NODES nodes (each takes about 2.5 kB of rows: a two-hour curve's
+    200,000 took 750 MB). slowdown: a uniform slowdown on top of the one the law needs."""
     made = schedule_nodes(curve, grid, lim, rest_nodes)
     if made is None:
         return None
@@ -224,6 +224,11 @@ def envelope_schedule(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np
         if refined is None:
             break
         nodes, b_start = refined
+    spline = _Spline(nodes)
+    if not all(np.all(np.diff(spline.xi[first:last + 1]) > 0.0) for first, last in spline.ranges):
+        # a stretch whose coefficients do not follow one another (a single node between two
+        # rests, or nodes that coincide): no slope between them; the S-curve plan stays
+        return None
     scale = np.ones(nodes.s_mm.size)
     b, d, held = _profile(curve, grid, lim, nodes, feed_at_u, scale, None)
     for _ in range(REGROW_ROUNDS):
