@@ -12,6 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from nurbsfeed.planning.chain import insert_knot
+
 
 @dataclass(frozen=True)
 class Piece:
@@ -19,20 +21,6 @@ class Piece:
     knots: np.ndarray  # (n + degree + 2,)
     points: np.ndarray  # (n + 1, 3), Cartesian
     weights: np.ndarray  # (n + 1,)
-
-
-def insert_knot(degree: int, knots: np.ndarray, pw: np.ndarray, u: float
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """One insertion of u (Piegl & Tiller A5.1, r = 1): knots (m,), homogeneous points pw (n, 4)
-    -> (m + 1,), (n + 1, 4)."""
-    k = int(np.searchsorted(knots, u, side="right")) - 1
-    new = np.empty((len(pw) + 1, pw.shape[1]))
-    new[:k - degree + 1] = pw[:k - degree + 1]
-    new[k + 1:] = pw[k:]
-    for i in range(k - degree + 1, k + 1):
-        alpha = (u - knots[i]) / (knots[i + degree] - knots[i])
-        new[i] = alpha * pw[i] + (1.0 - alpha) * pw[i - 1]
-    return np.insert(knots, k + 1, u), new
 
 
 def cut(degree: int, knots: np.ndarray, points: np.ndarray, weights: np.ndarray,

@@ -9,9 +9,10 @@ import math
 import numpy as np
 
 from nurbsfeed.jit import jit
-from nurbsfeed.planning.limits import Limits, speed_limit
+from nurbsfeed.planning.limits import Limits
+from nurbsfeed.planning.optimal import _caps as optimal_caps
 from nurbsfeed.planning.optimal import _Nodes
-from nurbsfeed.planning.path_model import Frames, jump_speeds
+from nurbsfeed.planning.path_model import Frames
 
 TINY = 1e-12
 
@@ -28,15 +29,12 @@ def _geometry(f: Frames) -> np.ndarray:
 
 def _caps(lim: Limits, f: Frames, jumps: np.ndarray, feed_mm_s: np.ndarray) -> np.ndarray:
     """The speed limit (N,) where b' and b'' play no part, at points with frames f, jumps
-    (N, 3) of kappa N (`optimal._jumps`) and programmed feed (N,): `limits.speed_limit`, the
-    axis velocities, the binormal jerk sqrt(b) kappa tau b <= J_n, the jumps read over a period,
-    and where the path is straight (kappa = 0) the normal jerk kappa' v^3 <= J_n."""
-    cap = np.minimum(speed_limit(f.kappa, lim, feed_mm_s), jump_speeds(jumps, lim))
+    (N, 3) of kappa N (`optimal._jumps`) and programmed feed (N,): the optimal planner's caps
+    (`limits.speed_limit`, the axis velocities, the jumps read over a period), the binormal
+    jerk sqrt(b) kappa tau b <= J_n, and where the path is straight (kappa = 0) the normal jerk
+    kappa' v^3 <= J_n."""
+    cap = optimal_caps(lim, f, jumps, feed_mm_s)
     with np.errstate(divide="ignore"):
-        for x in range(3):
-            tx = np.abs(f.tangent[:, x])
-            cap = np.minimum(cap, np.where(tx > 0.0, lim.axis_vel_mm_s[x]
-                                           / np.where(tx > 0.0, tx, 1.0), np.inf))
         kt = np.abs(f.kappa * f.torsion)
         cap = np.minimum(cap, np.where(kt > 0.0, np.cbrt(lim.normal_jerk_mm_s3
                                                          / np.where(kt > 0.0, kt, 1.0)), np.inf))
