@@ -92,6 +92,8 @@ FIX_WORST = 1.5  # ... and while their profile lasts less than this times the be
 # its limits (a 3 mm star's arms between near-cusps) rises by the product of GROWTH a time
 REGROW_SHARE = 0.02
 REGROW_ROUNDS = 3
+# the rounds of growth on the nodes refined after the first profile
+REFINED_GROWTH = GROWTH[6:]
 REFINE_ROUNDS = 2  # times cells lasting longer than the optimal planner's limit are split
 # the law has a piece a sample: past this many periods a curve keeps the S-curve plan, whose
 # pieces do not grow with its duration (a two-hour curve's law would take 1.2 GB)
@@ -200,24 +202,31 @@ def _profile(curve: NurbsCurve, grid: Grid, lim: Limits, nodes: _Nodes,
     return frozen_b, frozen_d, held_by_growth
 
 
+def _coefficients_follow(spline: _Spline) -> bool:
+    """Whether each stretch's coefficients follow one another (not so where a single node lies
+    between two rests, or nodes coincide: no slope between them)."""
+    return all(bool(np.all(np.diff(spline.xi[first:last + 1]) > 0.0))
+               for first, last in spline.ranges)
+
+
 def envelope_schedule(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.ndarray,
-                      v_start: np.ndarray, feed_at_u: Callable[[np.ndarray], np.ndarray],
-                      worst_s: float = math.inf, slowdown: float = 1.0) -> Schedule | None:
+                      v_limit: np.ndarray, feed_at_u: Callable[[np.ndarray], np.ndarray],
+                      slowdown: float = 1.0) -> Schedule | None:
     """The schedule of `curve` under `lim` (path model) resting at grid nodes rest_nodes: the
-    ends, corners and cusps. v_start (M,): a speed at the grid's nodes that keeps the limits
-    (the S-curve plan's), which sets where cells are cut finer. feed_at_u: parameters (N,) ->
-    programmed feed (N,). None where it cannot plan (a profile of b = 0 inside a stretch: a
-    motion that never arrives; a stretch whose coefficients coincide), where its schedule
-    would last longer than worst_s (the plan it would replace) or MAX_LAW_PERIODS, or on a
-    grid of more than MAX_NODES nodes (each takes about 2.5 kB of rows: a two-hour curve's
-    200,000 took 750 MB). slowdown: a uniform slowdown on top of the one the law needs."""
+    ends, corners and cusps. v_limit (M,): the pointwise speed limit at the grid's nodes, no
+    lower than any speed a schedule reaches there. feed_at_u: parameters (N,) -> programmed
+    feed (N,). slowdown: a uniform slowdown on top of the one the law needs. None where it
+    cannot plan (a profile of b = 0 inside a stretch: a motion that never arrives; a stretch
+    whose coefficients coincide), where its schedule would last longer than MAX_LAW_PERIODS,
+    or on a grid of more than MAX_NODES nodes (each takes about 2.5 kB of rows: a two-hour
+    curve's 200,000 took 750 MB)."""
     made = schedule_nodes(curve, grid, lim, rest_nodes)
     if made is None:
         return None
     rest_nodes, nodes = made
-    # cells cut where the S-curve plan spends more than a few periods in one: the schedule is
-    # faster, so they last no longer under it (one profile, not one a refinement)
-    b_start = np.interp(nodes.s_mm, grid.s_mm, v_start) ** 2
+    # cells cut where even the limit spends more than a few periods in one (no schedule is
+    # faster), then again where the first profile does
+    b_start = np.interp(nodes.s_mm, grid.s_mm, v_limit) ** 2
     for _ in range(REFINE_ROUNDS):
         refined = _refined(curve, grid, nodes, b_start, lim.period_s,
                            _node_slopes(nodes.s_mm, b_start))
@@ -225,12 +234,19 @@ def envelope_schedule(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np
             break
         nodes, b_start = refined
     spline = _Spline(nodes)
-    if not all(np.all(np.diff(spline.xi[first:last + 1]) > 0.0) for first, last in spline.ranges):
-        # a stretch whose coefficients do not follow one another (a single node between two
-        # rests, or nodes that coincide): no slope between them; the S-curve plan stays
+    if not _coefficients_follow(spline):
         return None
     scale = np.ones(nodes.s_mm.size)
     b, d, held = _profile(curve, grid, lim, nodes, feed_at_u, scale, None)
+    refined = _refined(curve, grid, nodes, b, lim.period_s, d)
+    if refined is not None:
+        # on the finer nodes the profile grows from where it is by the last rounds' factors
+        nodes, b = refined
+        spline = _Spline(nodes)
+        if not _coefficients_follow(spline):
+            return None
+        scale = np.ones(nodes.s_mm.size)
+        b, d, held = _profile(curve, grid, lim, nodes, feed_at_u, scale, b, REFINED_GROWTH)
     for _ in range(REGROW_ROUNDS):
         if held <= REGROW_SHARE:
             break
@@ -238,7 +254,7 @@ def envelope_schedule(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np
         if not cycle_s(nodes, b_more, d_more) < cycle_s(nodes, b, d):
             break
         b, d = b_more, d_more
-    if not cycle_s(nodes, b, d) < min(worst_s, MAX_LAW_PERIODS * lim.period_s):
+    if not cycle_s(nodes, b, d) < MAX_LAW_PERIODS * lim.period_s:
         return None
     law = sampled_law(nodes, b, d, lim.period_s)
     excess, per_cell = _cell_ratios(curve, grid, nodes, law, lim)
@@ -254,7 +270,7 @@ def envelope_schedule(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np
         scale = scale / near
         # the last profile, lowered where the law broke a limit: one round, no growth
         b, d, _ = _profile(curve, grid, lim, nodes, feed_at_u, scale, b, (1.0,))
-        if not cycle_s(nodes, b, d) < min(worst_s, FIX_WORST * best[0]):
+        if not cycle_s(nodes, b, d) < FIX_WORST * best[0]:
             break  # (a round that lowered the limits this far cannot win)
         law = sampled_law(nodes, b, d, lim.period_s)
         excess, per_cell = _cell_ratios(curve, grid, nodes, law, lim)

@@ -722,11 +722,68 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
     extra_slowdown: a uniform slowdown the law takes on top of its own (the pipeline's check
     from the points asks for it, `pipeline.verified_plan`).
 
+    `planner: envelope` plans on the grid alone (planning.envelope_plan); the S-curve plan is
+    made only where the envelope gives way, where the curve stops inside (a corner, cusp or
+    reversal) or where the envelope slows its law uniformly by more than
+    envelope_plan.FALLBACK_SLOWDOWN; the faster of the two stands. `planner: optimal` starts
+    from the S-curve plan.
+
     CurveError (without a place) when the planned cycle exceeds max_curve_time_s or is not a
     finite number of periods: checked on the law's duration before it is rounded to whole
     periods, then on the cycle itself."""
-    rough_length = polygon_length(curve.points)
-    spacing = max(GRID_STEPS * lim.feed_mm_s * lim.period_s, rough_length / MAX_GRID_NODES)
+    if lim.planner == "envelope":
+        from nurbsfeed.planning.envelope_plan import FALLBACK_SLOWDOWN
+
+        plan = _envelope_plan(curve, lim, feed_u, feed_mm_s, max_curve_time_s, extra_slowdown)
+        if (plan is not None and plan.grid.stop_index.size == 0
+                and plan.uniform_slowdown <= FALLBACK_SLOWDOWN * extra_slowdown):
+            return plan
+        base = _scurve_plan(curve, lim, feed_u, feed_mm_s, max_curve_time_s, extra_slowdown)
+        return plan if plan is not None and plan.cycle_time_s < base.cycle_time_s else base
+    plan = _scurve_plan(curve, lim, feed_u, feed_mm_s, max_curve_time_s, extra_slowdown)
+    if lim.planner == "optimal":
+        return _optimal_plan(plan, feed_u, feed_mm_s)
+    return plan
+
+
+def _grid_spacing(curve: NurbsCurve, lim: Limits) -> float:
+    """The grid's node spacing: GRID_STEPS full-speed steps, wider on curves so long that
+    more than MAX_GRID_NODES nodes would take it."""
+    return max(GRID_STEPS * lim.feed_mm_s * lim.period_s,
+               polygon_length(curve.points) / MAX_GRID_NODES)
+
+
+def _envelope_plan(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s: np.ndarray,
+                   max_curve_time_s: float, extra_slowdown: float) -> Plan | None:
+    """The envelope planner's plan on one grid (`envelope_plan.plan_envelope`); None where it
+    cannot plan."""
+    from nurbsfeed.planning.envelope_plan import plan_envelope
+
+    feed_breaks = feed_u[1:] if feed_u.size else feed_u
+    kappa0 = curvature_threshold(lim)
+    grid = build_grid(curve, _grid_spacing(curve, lim), feed_breaks, kappa0)
+    fcap = feed_at(grid.u, feed_u, feed_mm_s)
+    least = least_cycle_s(curve, grid, lim, fcap)
+    if not least <= max_curve_time_s:
+        raise CurveError(_too_long(least, max_curve_time_s, least=True))
+    limit, _ = _path_limit(curve, grid, lim, speed_limit(grid.kappa_1_mm, lim, fcap))
+    made = plan_envelope(curve, grid, lim, limit, lambda u: feed_at(u, feed_u, feed_mm_s),
+                         extra_slowdown)
+    if made is None:
+        return None
+    schedule, kinds = made
+    n_peaks = int(np.count_nonzero(grid.kappa_1_mm[grid.peak_index] >= kappa0))
+    acc, jerk = scurve_limits(lim, np.ptp(curve.points, axis=0) > 0.0)
+    plan = _schedule_plan(curve, lim, grid, kappa0, n_peaks, kinds, schedule, acc, jerk)
+    if not plan.cycle_time_s <= max_curve_time_s:
+        raise CurveError(_too_long(plan.cycle_time_s, max_curve_time_s))
+    return plan
+
+
+def _scurve_plan(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s: np.ndarray,
+                 max_curve_time_s: float, extra_slowdown: float) -> Plan:
+    """The paper's key points and S-curves (the module's steps), limits everywhere."""
+    spacing = _grid_spacing(curve, lim)
     feed_breaks = feed_u[1:] if feed_u.size else feed_u
     kappa0 = curvature_threshold(lim)
     extra_u = feed_breaks
@@ -800,50 +857,46 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
     for arr in (on.key_node, on.key_kind, on.nominal, on.v, on.peak, on.hold_start, on.hold_end,
                 piece_key, piece_periods, piece_scale):
         arr.setflags(write=False)
-    plan = Plan(curve, lim, grid, kappa0, int(on.n_peaks), on.key_node, on.key_kind, on.nominal,
+    return Plan(curve, lim, grid, kappa0, int(on.n_peaks), on.key_node, on.key_kind, on.nominal,
                 on.v, on.peak, on.hold_start, on.hold_end, law, slowdown, piece_key,
                 piece_periods, piece_scale, on.rounds, acc, jerk)
-    if lim.planner in ("optimal", "envelope"):
-        return _optimal_plan(plan, feed_u, feed_mm_s, extra_slowdown)
-    return plan
 
 
-def _optimal_plan(base: Plan, feed_u: np.ndarray, feed_mm_s: np.ndarray,
-                  extra_slowdown: float = 1.0) -> Plan:
+def _optimal_plan(base: Plan, feed_u: np.ndarray, feed_mm_s: np.ndarray) -> Plan:
     """`planning.optimal`'s schedule as a plan, if it is faster than the S-curve plan `base`
     (whose law is its first iterate and whose rests it keeps); else base."""
     from nurbsfeed.planning.optimal import optimal_schedule
 
-    grid, law, lim = base.grid, base.law, base.limits
-    rest_keys = base.piece_key
-    rest_nodes = base.key_node[rest_keys]
+    grid, law = base.grid, base.law
+    rest_nodes = base.key_node[base.piece_key]
     # the base law's speed at the nodes, as it runs (each stretch slowed by its lambda)
     v_nodes = law.speed_at(grid.s_mm)
     v_nodes /= float(base.piece_scale.max(initial=1.0))
-    if lim.planner == "envelope":
-        from nurbsfeed.planning.envelope import envelope_schedule
-
-        schedule = envelope_schedule(base.curve, grid, lim, rest_nodes, v_nodes,
-                                     lambda u: feed_at(u, feed_u, feed_mm_s),
-                                     base.cycle_time_s, extra_slowdown)
-    else:
-        schedule = optimal_schedule(base.curve, grid, lim, rest_nodes, v_nodes,
-                                    lambda u: feed_at(u, feed_u, feed_mm_s))
+    schedule = optimal_schedule(base.curve, grid, base.limits, rest_nodes, v_nodes,
+                                lambda u: feed_at(u, feed_u, feed_mm_s))
     if schedule is None or not schedule.law.duration_s < base.cycle_time_s:
         return base
+    kinds = base.key_kind[np.searchsorted(base.key_node, schedule.rest_nodes)]
+    return _schedule_plan(base.curve, base.limits, grid, base.kappa0_1_mm,
+                          base.n_peaks_above_threshold, kinds, schedule,
+                          base.scurve_acc_mm_s2, base.scurve_jerk_mm_s3)
+
+
+def _schedule_plan(curve: NurbsCurve, lim: Limits, grid: Grid, kappa0: float, n_peaks: int,
+                   kinds: np.ndarray, schedule, acc: float, jerk: float) -> Plan:
+    """A schedule of planning.optimal or planning.envelope (`optimal.Schedule`) as a plan: its
+    rests (of kinds (R,)) are the keys, one stretch between each two, whole periods each."""
     rest_nodes = schedule.rest_nodes
-    keys = np.searchsorted(base.key_node, rest_nodes)
-    kinds = base.key_kind[keys]
     zeros = np.zeros(rest_nodes.size)
     key_t = schedule.law.key_t_s
     periods = np.rint(np.diff(key_t) / lim.period_s).astype(np.int64)
     peaks = np.array([float(schedule.law.v0_mm_s[(schedule.law.t0_s >= key_t[k])
                                                   & (schedule.law.t0_s < key_t[k + 1])]
                             .max(initial=0.0)) for k in range(rest_nodes.size - 1)])
-    arrays = (rest_nodes, kinds, zeros, zeros.copy(), peaks, np.zeros(peaks.size),
-              np.zeros(peaks.size), np.arange(rest_nodes.size), periods, np.ones(periods.size))
+    arrays = (rest_nodes, np.asarray(kinds, dtype=np.int64), zeros, zeros.copy(), peaks,
+              np.zeros(peaks.size), np.zeros(peaks.size), np.arange(rest_nodes.size), periods,
+              np.ones(periods.size))
     for arr in arrays:
         arr.setflags(write=False)
-    return Plan(base.curve, lim, grid, base.kappa0_1_mm, base.n_peaks_above_threshold,
-                *arrays[:7], schedule.law, schedule.slowdown, *arrays[7:], schedule.rounds,
-                base.scurve_acc_mm_s2, base.scurve_jerk_mm_s3, lim.planner)
+    return Plan(curve, lim, grid, kappa0, n_peaks, *arrays[:7], schedule.law, schedule.slowdown,
+                *arrays[7:], schedule.rounds, acc, jerk, lim.planner)
