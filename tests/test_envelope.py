@@ -90,7 +90,7 @@ def test_the_row_pass_lowers_both_sides_of_a_minimum_that_curves_up_too_fast() -
     rows = np.zeros((c.size, envelope_rows.ROWS3, 7))
     rows[:, :, 3] = np.inf
     rows[2, 0] = (1.0, -2.0, 1.0, 4.0, 0.0, 1.0, 0.0)  # c1 - 2 c2 + c3 <= 4 / sqrt(c2)
-    envelope_passes._row_pass(c, rows, 0, c.size - 1)
+    envelope_passes._row_pass(c, rows, 0, c.size - 1, False)
     assert c[1] == pytest.approx(c[3]) and c[1] >= c[2] == 1.0
     assert c[1] - 2 * c[2] + c[3] <= 4.0 / np.sqrt(c[2]) + 1e-12
 
@@ -104,10 +104,34 @@ def test_the_row_pass_lowers_another_coefficient_where_the_one_ahead_cannot_keep
     rows = np.zeros((c.size, envelope_rows.ROWS3, 7))
     rows[:, :, 3] = np.inf
     rows[1, 0] = (1.0, 0.0, 0.6, 9.0 * np.sqrt(20.0), 0.0, 1.0, 0.0)
-    envelope_passes._row_pass(c, rows, 0, c.size - 1)
+    envelope_passes._row_pass(c, rows, 0, c.size - 1, False)
     assert np.all(c > 0.0)
     assert c[0] == pytest.approx(3.0) and (c[1], c[2]) == (20.0, 10.0)
     assert c[0] + 0.6 * c[2] <= 9.0 + 1e-9
+
+
+def test_the_row_pass_backward_first_is_the_forward_pass_of_the_mirrored_stretch() -> None:
+    """Backward first on a stretch gives what forward first gives on the stretch mirrored (its
+    coefficients and each row's outer weights reversed), and the two orders differ on the same
+    stretch: a valley's two sides come down alike only when the passes take both in turn."""
+    rng = np.random.default_rng(7)
+    n = 12
+    c = rng.uniform(5.0, 50.0, n)
+    rows = np.zeros((n, envelope_rows.ROWS3, 7))
+    rows[:, :, 3] = np.inf
+    rows[1:-1, 0, :3] = rng.uniform(0.2, 1.0, (n - 2, 3)) * np.array([1.0, -1.0, 1.0])
+    rows[1:-1, 0, 3] = rng.uniform(1.0, 20.0, n - 2)
+    rows[1:-1, 0, 4:] = (0.25, 0.5, 0.25)
+    mirrored = rows[::-1].copy()
+    mirrored[:, :, [0, 2]] = mirrored[:, :, [2, 0]]
+    mirrored[:, :, [4, 6]] = mirrored[:, :, [6, 4]]
+    backward, forward_of_mirror = c.copy(), c[::-1].copy()
+    envelope_passes._row_pass(backward, rows, 0, n - 1, True)
+    envelope_passes._row_pass(forward_of_mirror, mirrored, 0, n - 1, False)
+    assert np.allclose(backward, forward_of_mirror[::-1], rtol=1e-12)
+    forward = c.copy()
+    envelope_passes._row_pass(forward, rows, 0, n - 1, False)
+    assert not np.allclose(forward, backward)
 
 
 def test_the_row_root_is_the_greatest_value_keeping_the_row() -> None:

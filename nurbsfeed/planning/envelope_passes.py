@@ -166,14 +166,17 @@ def _row_root(row, left, middle, right, j, low, high):
 
 
 @jit
-def _row_pass(c, rows, first, last):
+def _row_pass(c, rows, first, last, backward_first):
     """Rows A c_k-1 + B c_k + C c_k+1 <= budget / sqrt(b) (`_cell_rows`) on the inner
-    coefficients first+1..last-1,
-    forward then backward: a broken row lowers the coefficient ahead in the sweep where its
-    weight is near the largest (a bound on how fast b may change), else the one of the largest
-    weight. Returns the largest relative change."""
+    coefficients first+1..last-1, forward then backward (backward then forward with
+    backward_first): a broken row lowers the coefficient ahead in the sweep where its weight is
+    near the largest (a bound on how fast b may change), else the one of the largest weight.
+    The first sweep settles most rows, each by the coefficient ahead of it, so a pass run in
+    one order alone sinks the side of every valley the motion comes down (`envelope._profile`
+    alternates the order). Returns the largest relative change."""
     change = 0.0
-    for direction in range(2):
+    for order in range(2):
+        direction = 1 - order if backward_first else order
         for step in range(last - first - 1):
             k = first + 1 + step if direction == 0 else last - 1 - step
             for r in range(rows.shape[1]):
