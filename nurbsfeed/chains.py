@@ -31,7 +31,7 @@ from nurbsfeed.gcode.writer import round_ticks, written_decimals
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.machine import Machine
 from nurbsfeed.planning.chain import CORNER_TURN_RAD, can_follow, chain_weights
-from nurbsfeed.planning.planner import GRID_STEPS
+from nurbsfeed.planning.plan import GRID_STEPS
 from nurbsfeed.program import MM_PER_UNIT, CurveBlock, PassThrough, ProgramItem
 
 MAX_WINDOW_CURVES = 400

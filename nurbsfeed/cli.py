@@ -52,7 +52,7 @@ if TYPE_CHECKING:
 
     from nurbsfeed.machine import Machine
     from nurbsfeed.planning.chain import Joints
-    from nurbsfeed.planning.planner import Plan
+    from nurbsfeed.planning.plan import Plan
     from nurbsfeed.program import CurveBlock
 
 TAYLOR1_WARNING = ("nurbsfeed: warning: taylor1 is the paper's first-order baseline; its points "
@@ -686,7 +686,7 @@ def plan(input: Path, dialect: str, reference: bool, **kwargs: Any) -> None:
     from nurbsfeed.analysis import time_optimal_bound_s
     from nurbsfeed.chains import ChainWindow, chain_items
     from nurbsfeed.pipeline import chain_block, joint_speeds, plan_block
-    from nurbsfeed.planning.planner import KIND_NAMES
+    from nurbsfeed.planning.plan import KIND_NAMES
     from nurbsfeed.readers import read_program
 
     if reference:

@@ -65,7 +65,7 @@ import numpy as np
 from nurbsfeed.choices import METHOD_NAMES
 from nurbsfeed.geometry.kernel import find_span, point_d1
 from nurbsfeed.jit import jit
-from nurbsfeed.planning.planner import Plan
+from nurbsfeed.planning.plan import Plan
 from nurbsfeed.planning.timelaw import TimeLaw, evaluate
 
 METHODS = {name: code for code, name in enumerate(METHOD_NAMES)}  # name -> kernel code

@@ -41,7 +41,8 @@ from nurbsfeed.interpolate import PointChunk, Stepping
 from nurbsfeed.machine import FLOOR_MARGIN, Machine
 from nurbsfeed.planning.chain import Chain, Joints, chain_feed, joint_feed, joints, merge_curves
 from nurbsfeed.planning.limits import Limits
-from nurbsfeed.planning.planner import Plan, plan_curve
+from nurbsfeed.planning.plan import Plan
+from nurbsfeed.planning.planner import plan_curve
 from nurbsfeed.program import CurveBlock, PassThrough, ProgramItem
 from nurbsfeed.readers import read_program
 from nurbsfeed.safety import MotionGuard, feed_cap_mm_s, slowdown_from_points

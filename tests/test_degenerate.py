@@ -29,7 +29,8 @@ from nurbsfeed.interpolate import interpolate
 from nurbsfeed.machine import load_machine
 from nurbsfeed.pipeline import convert_file
 from nurbsfeed.planning.limits import Limits
-from nurbsfeed.planning.planner import KIND_CORNER, KIND_CUSP, KIND_NAMES, plan_curve
+from nurbsfeed.planning.plan import KIND_CORNER, KIND_CUSP, KIND_NAMES
+from nurbsfeed.planning.planner import plan_curve
 from nurbsfeed.readers import read_program
 from tests.conftest import default_paper_limits, load_curve
 from tests.motion_check import FD_REL, motion, written_moves

@@ -18,7 +18,7 @@ from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.interpolate import interpolate
 from nurbsfeed.machine import load_machine
 from nurbsfeed.pipeline import plan_block
-from nurbsfeed.planning.planner import KIND_CUSP
+from nurbsfeed.planning.plan import KIND_CUSP
 from nurbsfeed.program import CurveBlock
 from nurbsfeed.readers import read_program
 from tests.fuzz.oracle import check_case

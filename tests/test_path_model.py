@@ -20,8 +20,9 @@ from nurbsfeed.geometry.nurbs import curvature_from_derivatives
 from nurbsfeed.interpolate import interpolate
 from nurbsfeed.machine import load_machine, machine_from_mapping
 from nurbsfeed.pipeline import convert_file, plan_block
+from nurbsfeed.planning.path_check import least_cycle_s
 from nurbsfeed.planning.path_model import frames, jump_limits, motion_ratio
-from nurbsfeed.planning.planner import least_cycle_s, plan_curve
+from nurbsfeed.planning.planner import plan_curve
 from nurbsfeed.readers.json_curves import read_json_curves
 from nurbsfeed.safety import MotionGuard
 from tests.bench.dense_curves import dense_curves

@@ -13,7 +13,8 @@ from nurbsfeed.geometry.nurbs import curvature_from_derivatives
 from nurbsfeed.interpolate import BUMP_MAX_SLOWDOWN, BUMP_PERIODS, METHODS, interpolate
 from nurbsfeed.machine import load_machine
 from nurbsfeed.planning.limits import Limits, curvature_threshold
-from nurbsfeed.planning.planner import KIND_PEAK, plan_curve
+from nurbsfeed.planning.plan import KIND_PEAK
+from nurbsfeed.planning.planner import plan_curve
 from tests import naive_nurbs
 from tests.conftest import law_increments, law_speed_at_arc
 from tests.limits_check import assert_within, measure

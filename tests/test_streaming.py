@@ -22,7 +22,8 @@ from nurbsfeed.interpolate import BUMP_PERIODS, Stepping, interpolate
 from nurbsfeed.machine import load_machine
 from nurbsfeed.pipeline import convert_block, convert_file, plan_block
 from nurbsfeed.planning.limits import Limits
-from nurbsfeed.planning.planner import MAX_STRETCH_PERIODS, _whole_periods, plan_curve
+from nurbsfeed.planning.planner import plan_curve
+from nurbsfeed.planning.scurve_plan import MAX_STRETCH_PERIODS, _whole_periods
 from nurbsfeed.program import CurveBlock
 from tests.conftest import ROOT, SAMPLES
 from tests.test_cli import run

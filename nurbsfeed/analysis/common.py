@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from nurbsfeed.planning.limits import speed_limit
-from nurbsfeed.planning.planner import Plan, feed_at
+from nurbsfeed.planning.plan import Plan, feed_at
 from nurbsfeed.program import CurveBlock
 from nurbsfeed.readers import read_program
 

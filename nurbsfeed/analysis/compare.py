@@ -21,7 +21,7 @@ from nurbsfeed.interpolate import (
 )
 from nurbsfeed.machine import Machine
 from nurbsfeed.pipeline import plan_block
-from nurbsfeed.planning.planner import Plan
+from nurbsfeed.planning.plan import Plan
 
 # Wei et al. 2022, Table 2 (butterfly, Table 1 limits, MATLAB): max feed fluctuation in %, and
 # computation time per interpolation step in microseconds.

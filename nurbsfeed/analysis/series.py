@@ -16,7 +16,7 @@ from nurbsfeed.interpolate import (
 )
 from nurbsfeed.machine import Machine
 from nurbsfeed.pipeline import plan_block
-from nurbsfeed.planning.planner import Plan, feed_at
+from nurbsfeed.planning.plan import Plan, feed_at
 from nurbsfeed.program import CurveBlock
 
 

@@ -74,6 +74,7 @@ from nurbsfeed.planning.optimal import (
     cycle_s,
     schedule_nodes,
 )
+from nurbsfeed.planning.path_check import arc_parameters
 from nurbsfeed.planning.path_model import frames, static_limit
 
 # each round raises the last round's profile by this factor (of b) at most, then lowers it to
@@ -115,8 +116,6 @@ def _profile(curve: NurbsCurve, grid: Grid, lim: Limits, nodes: _Nodes,
     curvature bound frozen at the caps asks b'' > 0 over whole stretches and drives b to 0).
     start: b (M,) at the nodes to grow from instead (a profile planned before, on other
     nodes or limits), growth_rounds the factors of the rounds (GROWTH)."""
-    from nurbsfeed.planning.planner import arc_parameters
-
     spline = _Spline(nodes)
     s = nodes.s_mm
     m = s.size

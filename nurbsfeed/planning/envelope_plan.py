@@ -23,6 +23,7 @@ from nurbsfeed.planning.envelope import envelope_schedule
 from nurbsfeed.planning.grid import Grid
 from nurbsfeed.planning.limits import Limits
 from nurbsfeed.planning.optimal import Schedule
+from nurbsfeed.planning.plan import KIND_CORNER, KIND_CUSP, KIND_END
 
 # an envelope plan slowed uniformly by more than this is compared with the S-curve plan
 FALLBACK_SLOWDOWN = 1.05
@@ -32,8 +33,6 @@ def rest_nodes(grid: Grid, limit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The nodes (R,) where every plan of this grid rests, ascending, and their kinds (R,):
     the ends, the grid's stops (a corner or, where the tangent turns back, a cusp), nodes of
     infinite curvature and nodes whose pointwise limit limit (M,) is 0."""
-    from nurbsfeed.planning.planner import KIND_CORNER, KIND_CUSP, KIND_END
-
     last = grid.u.size - 1
     kind = np.full(grid.u.size, -1, dtype=np.int64)
     kind[~(limit > 0.0)] = KIND_CORNER

@@ -41,7 +41,7 @@ periods, and a cubic spline in t through the samples, with v = a = 0 at both end
 constant-jerk pieces of a `TimeLaw`.
 
 Verification. The law is sampled twice a period and every path-model quantity measured
-(`planner.law_ratios`). Where one exceeds its limit (between constraint points, or where the
+(`path_check.law_ratios`). Where one exceeds its limit (between constraint points, or where the
 spline departs from the schedule), the limits of that cell and its neighbours are lowered by the
 ratio and the programs run again (FIX_ROUNDS), keeping the plan that is fastest after the uniform
 slowdown it still needs. The base plan stays where the optimiser cannot help: a program that
@@ -65,6 +65,7 @@ import numpy as np
 from nurbsfeed.geometry.nurbs import NurbsCurve
 from nurbsfeed.planning.grid import Grid
 from nurbsfeed.planning.limits import Limits, speed_limit
+from nurbsfeed.planning.path_check import arc_parameters, law_ratios
 from nurbsfeed.planning.path_model import Frames, frames, jump_speeds, kappa_n_jumps
 from nurbsfeed.planning.timelaw import TimeLaw
 
@@ -152,8 +153,6 @@ def _nodes(curve: NurbsCurve, grid: Grid, lim: Limits, s_mm: np.ndarray, u: np.n
     each rest nodes at h, 2h, 4h ... from it, h = REST_CELL_SHARE of the distance a constant-jerk
     start takes to reach the acceleration limit, or of half the stretch if that is shorter (a rest
     cell runs at constant jerk all along: a long one is a slow start)."""
-    from nurbsfeed.planning.planner import arc_parameters
-
     floor = MIN_CELL_REL * max(float(s_mm[-1]), 1e-300)
     keep = np.ones(s_mm.size, dtype=bool)
     kept = 0
@@ -207,8 +206,6 @@ class _Points:
 
 def _points(curve: NurbsCurve, grid: Grid, nodes: _Nodes) -> _Points:
     import scipy.sparse as sp
-
-    from nurbsfeed.planning.planner import arc_parameters
 
     m = nodes.s_mm.size
     h = nodes.h_mm
@@ -516,8 +513,6 @@ def _refined(curve: NurbsCurve, grid: Grid, nodes: _Nodes, b: np.ndarray,
     """Cells lasting longer than REFINE_PERIODS periods cut into pieces that do not, and b
     interpolated on the new nodes; None if none does. d: the slopes at the nodes (the
     three-point differences of b when None)."""
-    from nurbsfeed.planning.planner import arc_parameters
-
     cell_t = _cell_times(nodes, b, nodes.slopes @ b if d is None else d)
     long = (cell_t > REFINE_PERIODS * period_s) & ~nodes.rest[:-1] & ~nodes.rest[1:]
     long &= np.isfinite(cell_t)
@@ -541,9 +536,7 @@ def _refined(curve: NurbsCurve, grid: Grid, nodes: _Nodes, b: np.ndarray,
 def _cell_ratios(curve: NurbsCurve, grid: Grid, nodes: _Nodes, law: TimeLaw,
                  lim: Limits) -> tuple[float, np.ndarray]:
     """The law's largest motion ratio (at least 1), and per cell (M-1,) the largest of the
-    samples inside it (`planner.law_ratios`)."""
-    from nurbsfeed.planning.planner import law_ratios
-
+    samples inside it (`path_check.law_ratios`)."""
     worst = 1.0
     per_cell = np.zeros(nodes.h_mm.size)
     for s_mm, ratio, _ in law_ratios(curve, grid, law, lim):

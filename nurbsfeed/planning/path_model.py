@@ -33,7 +33,7 @@ from nurbsfeed.planning.limits import Limits
 # The S-curve's own acceleration and jerk, as a share of the lowest limit they add to: the
 # rest is left for the terms the curve adds where the S-curve accelerates (kappa^2 v^3 beside
 # j = -J along the path, kappa v^2 N_x beside a T_x per axis); what they still break is removed
-# by the planner's uniform slowdown (`planner.path_excess`). 0.75 gave the shortest cycles of
+# by the planner's uniform slowdown (`path_check.path_excess`). 0.75 gave the shortest cycles of
 # 0.6, 0.75, 0.85 and 1.0 on the samples and dense test curves.
 SCURVE_SHARE = 0.75
 STRAIGHT_REL = 1e-12  # |C' x C''| below this share of |C'| |C''|: the curve is straight there

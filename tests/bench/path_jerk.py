@@ -33,7 +33,8 @@ from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.interpolate import interpolate
 from nurbsfeed.machine import Machine, load_machine
 from nurbsfeed.pipeline import plan_block
-from nurbsfeed.planning.planner import Plan, plan_curve
+from nurbsfeed.planning.plan import Plan
+from nurbsfeed.planning.planner import plan_curve
 from tests.bench.dense_curves import dense_curves
 from tests.conftest import default_paper_machine
 from tests.motion_from_positions import path_motion
