@@ -128,12 +128,18 @@ def span_polynomials(knots, cw, degree):
     """
     p = degree
     n_ctrl = cw.shape[0]
-    coef = np.zeros((n_ctrl, 2, p + 1, 4))
+    coef = np.empty((n_ctrl, 2, p + 1, 4))
+    # zeros by a loop: np.zeros would compile numba's own implementation for a 4-D shape
+    for i in range(n_ctrl):
+        for side in range(2):
+            for k in range(p + 1):
+                for c in range(4):
+                    coef[i, side, k, c] = 0.0
     ndu = np.empty((p + 1, p + 1))
     a = np.empty((2, p + 1))
     left = np.empty(p + 1)
     right = np.empty(p + 1)
-    ders = np.zeros((p + 1, p + 1))
+    ders = np.empty((p + 1, p + 1))  # A2.3 writes every entry
     for span in range(p, n_ctrl):
         if knots[span + 1] <= knots[span]:
             continue

@@ -35,7 +35,7 @@ def chain_segments(s_key, v_key, v_peak, hold_start, hold_end, acc, jerk):
     v0 = np.empty(cap)
     a0 = np.empty(cap)
     jk = np.empty(cap)
-    key_t = np.zeros(s_key.size)
+    key_t = np.empty(s_key.size)  # every key's time is written below
     durations = np.empty(PHASES_PER_SEGMENT)
     jerks = np.empty(PHASES_PER_SEGMENT)
     count = 0
