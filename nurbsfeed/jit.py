@@ -31,7 +31,7 @@ F = TypeVar("F", bound=Callable[..., object])
 
 # seconds the kernels of a conversion take to compile on a 2-core machine with an empty cache
 # (the butterfly, default profile; `python -m tests.bench.first_run`, docs/benchmarks.md)
-FIRST_COMPILE_S = 15.0
+FIRST_COMPILE_S = 14.0
 
 
 def _numba_njit() -> Callable[[F], F] | None:
