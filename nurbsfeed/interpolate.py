@@ -442,8 +442,7 @@ def _step_run(method, knots, coef, degree, n_spans, k0, u0, span0, ds, sigma, sl
     return ds.size, STEP_DONE, 0.0, span
 
 
-@jit
-def _plan_time(t_a, t_b, n, k):
+def _plan_time(t_a: float, t_b: float, n: int, k: int) -> float:
     """Plan time of period k of a stretch of n periods from t_a to t_b: t_a + k (t_b - t_a) / n,
     t_b exactly at k = n. From the integer k, never by summing periods."""
     if k == n:
@@ -451,17 +450,15 @@ def _plan_time(t_a, t_b, n, k):
     return t_a + k * ((t_b - t_a) / n)
 
 
-@jit
-def _plan_times(t_a, t_b, n, lo, hi):
-    """`_plan_time` of periods lo .. hi - 1: (hi - lo,)."""
-    t = np.empty(hi - lo)
-    for k in range(lo, hi):
-        t[k - lo] = _plan_time(t_a, t_b, n, k)
+def _plan_times(t_a: float, t_b: float, n: int, lo: int, hi: int) -> np.ndarray:
+    """`_plan_time` of periods lo .. hi - 1: (hi - lo,), the same arithmetic in numpy."""
+    t = t_a + np.arange(lo, hi) * ((t_b - t_a) / n)
+    if lo <= n < hi:
+        t[n - lo] = t_b
     return t
 
 
-@jit
-def _first_period_at(t_a, t_b, n, x):
+def _first_period_at(t_a: float, t_b: float, n: int, x: float) -> int:
     """np.searchsorted over a stretch's plan times (n+1,), which are never stored: the first
     period k with t_k >= x, by bisection."""
     lo = 0
@@ -476,11 +473,11 @@ def _first_period_at(t_a, t_b, n, x):
 
 
 @jit
-def _sample_targets(t0, s0, v0, a0, jk, t_a, t_b, n, lo, ds, grid_s, grid_kappa, with_drift,
-                    node, drift, total, carry):
-    """The targets ds_k = s(t_k+1) - s(t_k) of periods lo .. lo + M - 1 of a stretch of n periods
-    from plan time t_a to t_b (`_plan_time`) into ds (M,), and the running sums over a stretch
-    sampled chunk by chunk in order: returns them (node, drift, total, carry) updated.
+def _sample_targets(t0, s0, v0, a0, jk, t_plan, ds, grid_s, grid_kappa, with_drift, node, drift,
+                    total, carry):
+    """The targets ds_k = s(t_k+1) - s(t_k) between the plan times t_plan (M+1,) of consecutive
+    periods (`_plan_times`) into ds (M,), and the running sums over a stretch sampled chunk by
+    chunk in order: returns them (node, drift, total, carry) updated.
 
     ds_k is taken piece by piece (the pieces' starts s0 differ, then the arcs within them), so
     that a tiny step far along the curve keeps its relative precision. total + carry is the
@@ -492,7 +489,6 @@ def _sample_targets(t0, s0, v0, a0, jk, t_a, t_b, n, lo, ds, grid_s, grid_kappa,
     beside a corner (kappa infinite) from its finite side.
     """
     m = ds.size
-    t_plan = _plan_times(t_a, t_b, n, lo, lo + m + 1)
     piece = np.empty(m + 1, dtype=np.int64)
     local = np.empty(m + 1)
     v = np.empty(m + 1)
@@ -714,25 +710,29 @@ class Interpolation:
         return ff[self.ds_mm > 0]
 
 
-@jit
-def _last_flat_periods(t0, a0, jk, v0, duration, t_a, t_b, n, periods):
+def _last_flat_periods(law: TimeLaw, t_a: float, t_b: float, n: int,
+                       periods: int) -> tuple[int, float]:
     """The first period k0 of the last `periods` periods of the stretch (n periods, plan times
     t_a .. t_b) that lie in one piece of the law that cruises or holds (a = j = 0, v > 0), all
     before the stretch's last period; the piece's speed. (-1, 0) if there are none."""
-    for i in range(t0.size - 1, -1, -1):
-        end = t0[i + 1] if i + 1 < t0.size else duration
-        if end <= t_a:
+    t0, a0, jk, v0 = law.t0_s, law.a0_mm_s2, law.jerk_mm_s3, law.v0_mm_s
+    end = np.append(t0[1:], law.duration_s)
+    before = int(np.searchsorted(t0, t_b, side="left"))  # the pieces that start before t_b
+    # Only a flat piece at least periods - 1 periods long can hold `periods` periods (the plan
+    # times' rounding is far below a period): the count below decides for those few.
+    candidates = np.flatnonzero((jk[:before] == 0.0) & (a0[:before] == 0.0) & (v0[:before] > 0.0)
+                                & (end[:before] - t0[:before] >= (periods - 1) * (t_b - t_a) / n))
+    for i in candidates[::-1].tolist():
+        if end[i] <= t_a:  # (and so every piece before it)
             break
-        if jk[i] != 0.0 or a0[i] != 0.0 or v0[i] <= 0.0 or t0[i] >= t_b:
-            continue
         # the periods k with t_k >= t0 and t_k+1 <= end, the last one before n - 1
         first = _first_period_at(t_a, t_b, n, t0[i])
-        after = _first_period_at(t_a, t_b, n, end)  # then the first with t_k > end (plan
-        if after <= n and _plan_time(t_a, t_b, n, after) == end:  # times strictly increase)
+        after = _first_period_at(t_a, t_b, n, end[i])  # then the first with t_k > end (plan
+        if after <= n and _plan_time(t_a, t_b, n, after) == end[i]:  # times strictly increase)
             after += 1
         stop = min(after - 1, n - 1)
         if stop - first >= periods:
-            return stop - periods, v0[i]
+            return stop - periods, float(v0[i])
     return -1, 0.0
 
 
@@ -796,31 +796,34 @@ class _Stretch:
         self.ds = np.empty(self.n if self.resident else min(self.n, chunk))
         for lo in range(0, self.n, chunk):
             ds = self.ds[:min(chunk, self.n - lo)] if not self.resident else self.ds
-            node, drift, total, carry = _sample_targets(
-                law.t0_s, law.s0_mm, law.v0_mm_s, law.a0_mm_s2, law.jerk_mm_s3, self.t_a,
-                self.t_b, self.n, lo, ds, plan.grid.s_mm, plan.grid.kappa_1_mm,
-                code == METHODS["rk2c"], node, drift, total, carry)
+            node, drift, total, carry = self._sample(lo, ds, code == METHODS["rk2c"], node, drift,
+                                                     total, carry)
             self.last_ds = float(ds[-1])
         self.total = total + carry
         self.drift = drift / 24.0
         if not self.resident:
             self.ds = np.empty(0)
-        k0, v_c = _last_flat_periods(law.t0_s, law.a0_mm_s2, law.jerk_mm_s3, law.v0_mm_s,
-                                     law.duration_s, self.t_a, self.t_b, self.n, BUMP_PERIODS)
+        k0, v_c = _last_flat_periods(law, self.t_a, self.t_b, self.n, BUMP_PERIODS)
         self.bump = None if k0 < 0 else _Bump(
-            int(k0), BUMP_PERIODS, _plan_times(self.t_a, self.t_b, self.n, k0,
-                                               k0 + BUMP_PERIODS + 1), float(v_c))
+            k0, BUMP_PERIODS, _plan_times(self.t_a, self.t_b, self.n, k0, k0 + BUMP_PERIODS + 1),
+            v_c)
+
+    def _sample(self, lo: int, ds: np.ndarray, with_drift: bool, node: int, drift: float,
+                total: float, carry: float) -> tuple[int, float, float, float]:
+        """`_sample_targets` of periods lo .. lo + M - 1 into ds (M,)."""
+        plan = self.plan
+        return _sample_targets(*plan.law.pieces, _plan_times(self.t_a, self.t_b, self.n, lo,
+                                                             lo + ds.size + 1),
+                               ds, plan.grid.s_mm, plan.grid.kappa_1_mm, with_drift, node, drift,
+                               total, carry)
 
     def targets(self, lo: int, hi: int, e: float) -> np.ndarray:
         """The targets of periods lo .. hi - 1 (hi - lo,), with the bump of depth e taken out."""
         if self.resident:
             ds = self.ds[lo:hi]
         else:
-            law = self.plan.law
             ds = np.empty(hi - lo)
-            _sample_targets(law.t0_s, law.s0_mm, law.v0_mm_s, law.a0_mm_s2, law.jerk_mm_s3,
-                            self.t_a, self.t_b, self.n, lo, ds, self.plan.grid.s_mm,
-                            self.plan.grid.kappa_1_mm, False, 0, 0.0, 0.0, 0.0)
+            self._sample(lo, ds, False, 0, 0.0, 0.0, 0.0)
         return ds if self.bump is None else self.bump.lower(ds, lo, e)
 
     def _step(self, u0: float, ds: np.ndarray, sigma: float, u_out: np.ndarray,

@@ -30,7 +30,6 @@ from collections.abc import Iterable
 import numpy as np
 
 from nurbsfeed.errors import CurveError
-from nurbsfeed.jit import jit
 from nurbsfeed.planning.limits import Limits
 from nurbsfeed.program import CurveBlock
 
@@ -40,29 +39,31 @@ GUARD_JERK_REL = 0.05
 GUARD_ABS_MM = 1e-9
 
 
-@jit
-def _first_wild(points, before, max_step_mm, max_turn_mm):
+def _first_wild(points: np.ndarray, before: np.ndarray, max_step_mm: float,
+                max_turn_mm: float) -> tuple[int, int, float]:
     """The first k of points (N, 3), after the points `before` (2, 3: the last but one, the
     last; NaN: none), whose move or second difference breaks its bound, and what broke (0 none,
-    1 not finite, 2 step, 3 second difference) with its size."""
-    px, py, pz = before[1, 0], before[1, 1], before[1, 2]
-    qx, qy, qz = before[0, 0], before[0, 1], before[0, 2]
-    for k in range(points.shape[0]):
-        x, y, z = points[k, 0], points[k, 1], points[k, 2]
-        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
-            return k, 1, 0.0
-        if px == px:
-            step = math.sqrt((x - px) ** 2 + (y - py) ** 2 + (z - pz) ** 2)
-            if step > max_step_mm:
-                return k, 2, step
-            if qx == qx:
-                turn = math.sqrt((x - 2.0 * px + qx) ** 2 + (y - 2.0 * py + qy) ** 2
-                                 + (z - 2.0 * pz + qz) ** 2)
-                if turn > max_turn_mm:
-                    return k, 3, turn
-        qx, qy, qz = px, py, pz
-        px, py, pz = x, y, z
-    return -1, 0, 0.0
+    1 not finite, 2 step, 3 second difference) with its size. In numpy: it runs once per chunk
+    of points, and a kernel would cost the first conversion its compile time."""
+    joined = np.concatenate([before, points])
+    current, last, last_but_one = joined[2:], joined[1:-1], joined[:-2]
+    # a missing point before (NaN) or one after a non-finite point makes a NaN, which breaks
+    # no bound; inf - inf and overflowing squares are not warned about
+    with np.errstate(invalid="ignore", over="ignore"):
+        move = current - last
+        turn = current - 2.0 * last + last_but_one
+        step_mm = np.sqrt(move[:, 0] ** 2 + move[:, 1] ** 2 + move[:, 2] ** 2)
+        turn_mm = np.sqrt(turn[:, 0] ** 2 + turn[:, 1] ** 2 + turn[:, 2] ** 2)
+    finite = np.isfinite(points).all(axis=1)
+    wild = np.flatnonzero(~finite | (step_mm > max_step_mm) | (turn_mm > max_turn_mm))
+    if wild.size == 0:
+        return -1, 0, 0.0
+    k = int(wild[0])
+    if not finite[k]:
+        return k, 1, 0.0
+    if step_mm[k] > max_step_mm:
+        return k, 2, float(step_mm[k])
+    return k, 3, float(turn_mm[k])
 
 
 def feed_cap_mm_s(lim: Limits, block: CurveBlock) -> float:

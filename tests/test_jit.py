@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import threading
 import time
 
@@ -82,6 +83,40 @@ def test_short_compiles_add_up_to_the_threshold() -> None:
     finally:
         for listener in listeners:
             _unregister(listener)
+
+
+def test_the_garbage_collector_is_off_while_numba_compiles_and_as_it_was_after() -> None:
+    """On during a compile only if it was on before: off inside the compile (the kernel's
+    compile hook sees it), back on after; left off after if it was off before."""
+    from numba.core import event
+
+    seen: list[bool] = []
+
+    class Probe(event.Listener):
+        def on_start(self, ev):  # type: ignore[no-untyped-def]
+            seen.append(gc.isenabled())
+
+        def on_end(self, ev):  # type: ignore[no-untyped-def]
+            pass
+
+    probe = Probe()
+    event.register("numba:compile", probe)
+    was_enabled = gc.isenabled()
+    try:
+        gc.enable()
+        kernel, slow = _fresh_kernel(0.0)
+        _unregister(slow)
+        kernel(1)
+        assert seen == [False] and gc.isenabled()
+        gc.disable()
+        kernel(1.5)  # a second signature: a second compile
+        assert seen == [False, False] and not gc.isenabled()
+    finally:
+        _unregister(probe)
+        if was_enabled:
+            gc.enable()
+        else:
+            gc.disable()
 
 
 def _unregister(listener: object) -> None:

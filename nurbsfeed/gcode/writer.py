@@ -81,13 +81,6 @@ def _round_tick(value, scale):
     return -whole if scaled < 0.0 else whole
 
 
-@jit
-def _round_many(values, per_mm, scale, out):
-    """`_round_tick` of every value in mm converted to the output unit: values, out (M,)."""
-    for q in range(values.size):
-        out[q] = _round_tick(values[q] * per_mm, scale)
-
-
 # _emit_moves' state between calls (an int64 array): the last written point in ticks, the
 # periods since it, the last F (ticks * 10^(FEED_MAX_DECIMALS - decimals); -1: none yet), whether
 # the next line is the curve's first, and the moves written
@@ -235,14 +228,12 @@ def _emit_moves(points, per_mm, decimals, scale, unit, period_s, feed_decimals, 
 
 def round_ticks(points: np.ndarray, decimals: int, per_mm: float = 1.0) -> np.ndarray:
     """(N, 3) coordinates in mm -> (N, 3) int64 in units of 10^-decimals of the output unit
-    (per_mm of them to a mm), rounded as `_emit_moves` rounds them."""
-    values = np.ascontiguousarray(points, dtype=float)
-    out = np.empty(values.shape, dtype=np.int64)
-    flat = values.reshape(-1)
-    # read-only always, however `points` came: one compiled signature to load, not two
-    flat.flags.writeable = False
-    _round_many(flat, per_mm, 10.0**decimals, out.reshape(-1))
-    return out
+    (per_mm of them to a mm), rounded as `_emit_moves` rounds them (`_round_tick`'s arithmetic
+    in numpy: a few calls per curve, no kernel to compile)."""
+    scaled = np.asarray(points, dtype=float) * per_mm * 10.0**decimals
+    with np.errstate(invalid="ignore"):  # (a NaN is refused before it is written)
+        whole = np.floor(np.abs(scaled) + 0.5).astype(np.int64)
+    return np.where(scaled < 0.0, -whole, whole)
 
 
 def run_start(points: np.ndarray, ticks: np.ndarray, decimals: int, per_mm: float = 1.0) -> int:

@@ -33,7 +33,9 @@ def simpson_lengths(knots, coef, degree, nodes, speed_at_nodes, tol_per_u):
     than MAX_SPLITS splits makes s NaN from its end on: the caller refuses the curve there.
     """
     n_ctrl = coef.shape[0]
-    cumulative = np.zeros(nodes.size)
+    cumulative = np.empty(nodes.size)  # (not np.zeros: numba would compile it)
+    if nodes.size:
+        cumulative[0] = 0.0
     # the stack: intervals [a, b] still to integrate, with |C'| at a, the midpoint and b, their
     # Simpson value, tolerance and depth (one pending interval per level at most)
     stack = np.empty((MAX_DEPTH + 2, 8))

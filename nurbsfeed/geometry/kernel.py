@@ -5,7 +5,7 @@ polynomial of degree p, so it is stored once as its Taylor expansions at both en
 
     coef[i, 0, k, :] = (A, W)^(k)(knots[i]) / k!     coef[i, 1, k, :] = (A, W)^(k)(knots[i+1]) / k!
 
-(k = 0..p, `span_polynomials`; the derivatives from Piegl & Tiller A2.3, `_basis_ders`). An
+(k = 0..p, `span_polynomials`; the derivatives from Piegl & Tiller A2.3). An
 evaluation takes the expansion at the nearer end and runs Horner's rule in t = u - knot for the
 value and its derivatives, then the quotient rule (A4.2): C = A/W, C' = (A' - W'C)/W,
 C'' = (A'' - 2W'C' - W''C)/W (`point_d1`, `point_d2`). That costs a third of evaluating the basis
@@ -117,69 +117,73 @@ def eval_d1(knots: np.ndarray, cw: np.ndarray, degree: int, u: float, span: int,
 
 
 @jit
-def _basis_ders(knots, p, span, u, n, ndu, a, left, right, ders):
-    """Piegl & Tiller A2.3: ders[k, j] = k-th derivative of N_{span-p+j, p}(u), k <= n <= p."""
-    ndu[0, 0] = 1.0
-    for j in range(1, p + 1):
-        left[j] = u - knots[span + 1 - j]
-        right[j] = knots[span + j] - u
-        saved = 0.0
-        for r in range(j):
-            ndu[j, r] = right[r + 1] + left[j - r]
-            temp = ndu[r, j - 1] / ndu[j, r]
-            ndu[r, j] = saved + right[r + 1] * temp
-            saved = left[j - r] * temp
-        ndu[j, j] = saved
-    for j in range(p + 1):
-        ders[0, j] = ndu[j, p]
-    for r in range(p + 1):
-        s1 = 0
-        s2 = 1
-        a[0, 0] = 1.0
-        for k in range(1, n + 1):
-            d = 0.0
-            rk = r - k
-            pk = p - k
-            if r >= k:
-                a[s2, 0] = a[s1, 0] / ndu[pk + 1, rk]
-                d = a[s2, 0] * ndu[rk, pk]
-            j1 = 1 if rk >= -1 else -rk
-            j2 = k - 1 if r - 1 <= pk else p - r
-            for j in range(j1, j2 + 1):
-                a[s2, j] = (a[s1, j] - a[s1, j - 1]) / ndu[pk + 1, rk + j]
-                d += a[s2, j] * ndu[rk + j, pk]
-            if r <= pk:
-                a[s2, k] = -a[s1, k - 1] / ndu[pk + 1, r]
-                d += a[s2, k] * ndu[r, pk]
-            ders[k, r] = d
-            s1, s2 = s2, s1
-    factor = p
-    for k in range(1, n + 1):
-        for j in range(p + 1):
-            ders[k, j] *= factor
-        factor *= p - k
-
-
-@jit
 def span_polynomials(knots, cw, degree):
     """Taylor coefficients of (A, W) at both ends of every non-empty span: (n+1, 2, p+1, 4).
 
     Row i belongs to the span knots[i] <= u < knots[i+1] (the index `find_span` returns); rows
-    of empty spans and rows below `degree` stay zero and are never read.
+    of empty spans and rows below `degree` stay zero and are never read. At each end u of a
+    span, Piegl & Tiller A2.3 gives ders[k, j], the k-th derivative of N_{span-p+j, p}(u) (one
+    loop, not a helper kernel of its own: it runs once per curve, and a second kernel costs a
+    first conversion its compile time).
     """
     p = degree
     n_ctrl = cw.shape[0]
-    coef = np.zeros((n_ctrl, 2, p + 1, 4))
+    coef = np.empty((n_ctrl, 2, p + 1, 4))
+    # zeros by a loop: np.zeros would compile numba's own implementation for a 4-D shape
+    for i in range(n_ctrl):
+        for side in range(2):
+            for k in range(p + 1):
+                for c in range(4):
+                    coef[i, side, k, c] = 0.0
     ndu = np.empty((p + 1, p + 1))
     a = np.empty((2, p + 1))
     left = np.empty(p + 1)
     right = np.empty(p + 1)
-    ders = np.zeros((p + 1, p + 1))
+    ders = np.empty((p + 1, p + 1))  # A2.3 writes every entry
     for span in range(p, n_ctrl):
         if knots[span + 1] <= knots[span]:
             continue
         for side in range(2):
-            _basis_ders(knots, p, span, knots[span + side], p, ndu, a, left, right, ders)
+            u = knots[span + side]
+            ndu[0, 0] = 1.0
+            for j in range(1, p + 1):
+                left[j] = u - knots[span + 1 - j]
+                right[j] = knots[span + j] - u
+                saved = 0.0
+                for r in range(j):
+                    ndu[j, r] = right[r + 1] + left[j - r]
+                    temp = ndu[r, j - 1] / ndu[j, r]
+                    ndu[r, j] = saved + right[r + 1] * temp
+                    saved = left[j - r] * temp
+                ndu[j, j] = saved
+            for j in range(p + 1):
+                ders[0, j] = ndu[j, p]
+            for r in range(p + 1):
+                s1 = 0
+                s2 = 1
+                a[0, 0] = 1.0
+                for k in range(1, p + 1):
+                    d = 0.0
+                    rk = r - k
+                    pk = p - k
+                    if r >= k:
+                        a[s2, 0] = a[s1, 0] / ndu[pk + 1, rk]
+                        d = a[s2, 0] * ndu[rk, pk]
+                    j1 = 1 if rk >= -1 else -rk
+                    j2 = k - 1 if r - 1 <= pk else p - r
+                    for j in range(j1, j2 + 1):
+                        a[s2, j] = (a[s1, j] - a[s1, j - 1]) / ndu[pk + 1, rk + j]
+                        d += a[s2, j] * ndu[rk + j, pk]
+                    if r <= pk:
+                        a[s2, k] = -a[s1, k - 1] / ndu[pk + 1, r]
+                        d += a[s2, k] * ndu[r, pk]
+                    ders[k, r] = d
+                    s1, s2 = s2, s1
+            factor = p
+            for k in range(1, p + 1):
+                for j in range(p + 1):
+                    ders[k, j] *= factor
+                factor *= p - k
             factorial = 1.0
             for k in range(p + 1):
                 if k > 0:
@@ -345,42 +349,23 @@ def curvature(x1, y1, z1, x2, y2, z2):
 
 
 @jit
-def curvature_many(c1, c2, out):
-    """`curvature` of every row: c1, c2 (M, 3) -> out (M,)."""
-    for q in range(out.size):
-        out[q], _ = curvature(c1[q, 0], c1[q, 1], c1[q, 2], c2[q, 0], c2[q, 1], c2[q, 2])
-
-
-@jit
 def eval_many(knots, coef, degree, u, order, out):
     """C and its derivatives up to `order` (0 to 3) at every u: out (order+1, M, 3).
 
     Parameters in increasing order are fastest (the span of the previous one is tried first);
     outside [u_min, u_max] the end spans extrapolate. Derivatives of order > degree are 0.
+    Every order goes through `point_d3` (its C, C' and C'' are `point_d2`'s to the bit): one
+    path to compile, at a fifth more arithmetic for the lower orders.
     """
     n_ctrl = coef.shape[0]
     span = degree
     for q in range(u.size):
         span = find_span(knots, degree, n_ctrl, u[q], span)
-        if order == 3:
-            d = point_d3(knots, coef, degree, span, u[q])
-            out[0, q, 0], out[0, q, 1], out[0, q, 2] = d[0], d[1], d[2]
-            out[1, q, 0], out[1, q, 1], out[1, q, 2] = d[3], d[4], d[5]
-            out[2, q, 0], out[2, q, 1], out[2, q, 2] = d[6], d[7], d[8]
-            out[3, q, 0], out[3, q, 1], out[3, q, 2] = d[9], d[10], d[11]
-            continue
-        cx, cy, cz, c1x, c1y, c1z, c2x, c2y, c2z = point_d2(knots, coef, degree, span, u[q])
-        out[0, q, 0] = cx
-        out[0, q, 1] = cy
-        out[0, q, 2] = cz
-        if order >= 1:
-            out[1, q, 0] = c1x
-            out[1, q, 1] = c1y
-            out[1, q, 2] = c1z
-            if order >= 2:
-                out[2, q, 0] = c2x
-                out[2, q, 1] = c2y
-                out[2, q, 2] = c2z
+        d = point_d3(knots, coef, degree, span, u[q])
+        for k in range(order + 1):
+            out[k, q, 0] = d[3 * k]
+            out[k, q, 1] = d[3 * k + 1]
+            out[k, q, 2] = d[3 * k + 2]
 
 
 @jit

@@ -26,7 +26,7 @@ from functools import cached_property
 import numpy as np
 
 from nurbsfeed.errors import CurveError
-from nurbsfeed.geometry.kernel import curvature_many, eval_many, span_polynomials
+from nurbsfeed.geometry.kernel import eval_many, span_polynomials
 
 # ---- the input envelope ------------------------------------------------------------------------
 # Degree: the Taylor-Horner evaluation stays within 2.3e-14 of the exact curve up to degree 9,
@@ -213,12 +213,21 @@ class NurbsCurve:
 
 
 def curvature_from_derivatives(c1: np.ndarray, c2: np.ndarray) -> np.ndarray:
-    """kappa = |C' x C''| / |C'|^3: (..., 3), (..., 3) -> (...); NaN where C' = 0."""
-    shape = np.shape(c1)[:-1]
-    out = np.empty(shape)
-    curvature_many(np.ascontiguousarray(c1, dtype=float).reshape(-1, 3),
-                   np.ascontiguousarray(c2, dtype=float).reshape(-1, 3), out.reshape(-1))
-    return out
+    """kappa = |C' x C''| / |C'|^3: (..., 3), (..., 3) -> (...); NaN where C' = 0.
+
+    The arithmetic of `geometry.kernel.curvature`, operation for operation, in numpy: the
+    compiled loops take it from there, and no kernel compiles for the few calls from Python."""
+    c1 = np.asarray(c1, dtype=float)
+    c2 = np.asarray(c2, dtype=float)
+    x1, y1, z1 = c1[..., 0], c1[..., 1], c1[..., 2]
+    x2, y2, z2 = c2[..., 0], c2[..., 1], c2[..., 2]
+    cx = y1 * z2 - z1 * y2
+    cy = z1 * x2 - x1 * z2
+    cz = x1 * y2 - y1 * x2
+    cross = np.sqrt(cx * cx + cy * cy + cz * cz)
+    speed = np.sqrt(x1 * x1 + y1 * y1 + z1 * z1)
+    cube = speed * speed * speed  # underflows to 0 below ~1e-103 even where speed > 0
+    return np.divide(cross, cube, out=np.full(cube.shape, np.nan), where=cube > 0.0)
 
 
 def check_knots(k: np.ndarray, degree: int, n_ctrl: int) -> None:

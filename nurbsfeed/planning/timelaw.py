@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -34,7 +35,7 @@ def chain_segments(s_key, v_key, v_peak, hold_start, hold_end, acc, jerk):
     v0 = np.empty(cap)
     a0 = np.empty(cap)
     jk = np.empty(cap)
-    key_t = np.zeros(s_key.size)
+    key_t = np.empty(s_key.size)  # every key's time is written below
     durations = np.empty(PHASES_PER_SEGMENT)
     jerks = np.empty(PHASES_PER_SEGMENT)
     count = 0
@@ -233,16 +234,19 @@ class TimeLaw:
             arr.setflags(write=False)
         return cls(*arrays, duration_s=float(duration_s))
 
-    def speed_at(self, s_mm: np.ndarray) -> np.ndarray:
-        """v where the law passes each arc length s_mm (M,) -> (M,) (see `speed_at_arc`).
+    @cached_property
+    def pieces(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """t0, s0, v0, a0 and jerk (P,) as the kernels take them: writable copies, the array type
+        the planner's compiled loop passes them (`chain_segments`' own arrays). A read-only
+        array is another type to numba: every kernel it reaches would compile a second time."""
+        return (self.t0_s.copy(), self.s0_mm.copy(), self.v0_mm_s.copy(), self.a0_mm_s2.copy(),
+                self.jerk_mm_s3.copy())
 
-        The pieces go in as writable copies: the planner's compiled loop passes writable ones,
-        and a read-only array is another type to numba, a second compilation of the kernel."""
+    def speed_at(self, s_mm: np.ndarray) -> np.ndarray:
+        """v where the law passes each arc length s_mm (M,) -> (M,) (see `speed_at_arc`)."""
         s_query = np.array(s_mm, dtype=float)
         out = np.empty(s_query.size)
-        speed_at_arc(self.t0_s.copy(), self.s0_mm.copy(), self.v0_mm_s.copy(),
-                     self.a0_mm_s2.copy(), self.jerk_mm_s3.copy(), self.duration_s, s_query,
-                     np.full(s_query.size, -np.inf), out)
+        speed_at_arc(*self.pieces, self.duration_s, s_query, np.full(s_query.size, -np.inf), out)
         return out
 
     def sample(self, t_s: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -251,6 +255,5 @@ class TimeLaw:
         t_s = np.ascontiguousarray(t_s, dtype=float)
         piece = np.empty(t_s.size, dtype=np.int64)
         local, v, a, j = (np.empty(t_s.size) for _ in range(4))
-        evaluate(self.t0_s, self.s0_mm, self.v0_mm_s, self.a0_mm_s2, self.jerk_mm_s3, t_s, piece,
-                 local, v, a, j)
+        evaluate(*self.pieces, t_s, piece, local, v, a, j)
         return piece, local, v, a, j
