@@ -29,9 +29,9 @@ from typing import Any, TypeVar
 
 F = TypeVar("F", bound=Callable[..., object])
 
-# seconds the kernels of a conversion take to compile on a 2-core machine with an empty cache
+# seconds the first conversion after an install takes on a 2-core machine (an empty cache)
 # (the butterfly, default profile; `python -m tests.bench.first_run`, docs/benchmarks.md)
-FIRST_COMPILE_S = 14.0
+FIRST_COMPILE_S = 10.0
 
 
 def _numba_njit() -> Callable[[F], F] | None:
