@@ -45,7 +45,7 @@ from nurbsfeed.planning.plan import Plan
 from nurbsfeed.planning.planner import plan_curve
 from nurbsfeed.program import CurveBlock, PassThrough, ProgramItem
 from nurbsfeed.readers import read_program
-from nurbsfeed.safety import MotionGuard, feed_cap_mm_s, slowdown_from_points
+from nurbsfeed.safety import GUARD_FEED_REL, MotionGuard, feed_cap_mm_s, slowdown_from_points
 
 TRACE_HEADER = "curve,k,t,u,s,v,a,j,x,y,z\n"
 # curve points, evenly spaced in u, on which a longer move at a rest is held to the chord
@@ -88,6 +88,8 @@ class FileReport:
 # the envelope planner's points read as positions (plan_block): the excess they may show, and the
 # uniform slowdowns that take it back before the S-curve planner plans the curve instead
 POSITION_REL = 0.005
+# half the motion guard's allowance on a speed; the stepping's own error (1e-5) stays below it
+POSITION_SPEED_REL = 0.5 * GUARD_FEED_REL
 POSITION_ROUNDS = 2
 
 
@@ -110,9 +112,13 @@ def verified_plan(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s:
                   feed_cap: float = math.inf) -> Plan:
     """`planner.plan_curve`, and under the path model a look at the plan's points (design §2e):
     stepped by `method`, they are read as positions one period apart
-    (`safety.slowdown_from_points`, feed_cap the highest feed on the curve); where an axis's
-    velocity, acceleration or jerk, or the jerk vector, is above its limit by more than
-    POSITION_REL, the law is slowed uniformly by what they ask (POSITION_ROUNDS times at most).
+    (`safety.slowdown_from_points`, feed_cap the highest feed on the curve); where the path's
+    speed or an axis's velocity is above its limit by more than POSITION_SPEED_REL, or an axis's
+    acceleration or jerk, or the jerk vector, by more than POSITION_REL, the law is slowed
+    uniformly by what they ask (POSITION_ROUNDS times at most). The speeds are held closer: the
+    motion guard allows them GUARD_FEED_REL (0.1 %), less than POSITION_REL (fuzz seed 58: an
+    envelope law at a 0.1 mm/s feed stepped to 0.100101 mm/s, and the guard refused the valid
+    program).
     An envelope plan still above then gives way to the S-curve plan, read the same way: the
     one bounded fallback. A plan still above after all that goes on to the motion guard, which
     refuses it (exit 2, located, nothing written)."""
@@ -127,9 +133,11 @@ def verified_plan(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s:
             plan = plan_curve(curve, planned, feed_u, feed_mm_s, max_curve_time_s)
         slowdown = 1.0
         for round_ in range(POSITION_ROUNDS + 1):
-            asks = slowdown_from_points(caps, (chunk.points
-                                               for chunk in Stepping(plan, method).chunks()))
-            if asks <= 1.0 + POSITION_REL:
+            speed, asks = slowdown_from_points(caps, (chunk.points
+                                                      for chunk in Stepping(plan, method).chunks()))
+            asks = max(speed if speed > 1.0 + POSITION_SPEED_REL else 1.0,
+                       asks if asks > 1.0 + POSITION_REL else 1.0)
+            if asks <= 1.0:
                 return plan
             if round_ == POSITION_ROUNDS:
                 break

@@ -160,16 +160,18 @@ class MotionGuard:
                              f"nothing was written (a safety check: please report this curve)")
 
 
-def slowdown_from_points(lim: Limits, chunks: Iterable[np.ndarray]) -> float:
-    """The least uniform slowdown (>= 1) after which the points (each chunk (N, 3), one period
-    apart, in order) keep every per-axis velocity, acceleration and jerk, and the jerk vector
-    within sqrt(J_t^2 + J_n^2), read from their differences (a slowdown by lambda divides a
-    k-th difference by lambda^k)."""
+def slowdown_from_points(lim: Limits, chunks: Iterable[np.ndarray]) -> tuple[float, float]:
+    """The least uniform slowdowns (>= 1) after which the points (each chunk (N, 3), one period
+    apart, in order) keep their limits, read from their differences (a slowdown by lambda
+    divides a k-th difference by lambda^k): the one the speeds ask (the path's, under
+    lim.feed_mm_s, and each axis's velocity), which the motion guard holds within
+    GUARD_FEED_REL, and the one every axis's acceleration and jerk and the jerk vector (within
+    sqrt(J_t^2 + J_n^2)) ask, which it holds within GUARD_ACC_REL and GUARD_JERK_REL."""
     period = lim.period_s
     limits = [np.asarray(per_axis, dtype=float) for per_axis in
               (lim.axis_vel_mm_s, lim.axis_acc_mm_s2, lim.axis_jerk_mm_s3)]
     jerk = math.hypot(lim.jerk_mm_s3, lim.normal_jerk_mm_s3)
-    worst = 1.0
+    speed, worst = 1.0, 1.0
     tail = np.empty((0, 3))
     for points in chunks:
         joined = np.concatenate([tail, points])
@@ -180,8 +182,12 @@ def slowdown_from_points(lim: Limits, chunks: Iterable[np.ndarray]) -> float:
             if diff.shape[0] == 0:
                 break
             ratio = float(np.max(np.abs(diff) / (per_axis * period**k)))
+            if k == 1:
+                step = float(np.max(np.linalg.norm(diff, axis=1)))
+                speed = max(speed, ratio, step / (lim.feed_mm_s * period))
+                continue
             if k == 3:
                 ratio = max(ratio, float(np.max(np.linalg.norm(diff, axis=1)))
                             / (jerk * period**3))
             worst = max(worst, ratio ** (1.0 / k))
-    return worst
+    return speed, worst

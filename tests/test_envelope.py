@@ -247,15 +247,62 @@ def test_random_curves_keep_every_limit_and_never_lose_to_the_scurve_planner(
 
 def test_the_slowdown_from_points_reads_each_difference_against_its_limit() -> None:
     """Points along X at constant acceleration a: second differences a T^2 exactly, so the
-    slowdown asked is sqrt(a / A_x) when a is above A_x, and 1 below it (and the velocity and
-    jerk within theirs)."""
-    lim = DEFAULT.limits
+    slowdown asked is sqrt(a / A_x) when a is above A_x, and 1 below it (the jerk within its
+    limit, the speeds within limits raised out of the way)."""
+    lim = dataclasses.replace(DEFAULT.limits, feed_mm_s=1e9, axis_vel_mm_s=(1e9, 1e9, 1e9))
     t = np.arange(30) * lim.period_s
     for acc, expected in ((4 * lim.axis_acc_mm_s2[0], 2.0), (0.5 * lim.axis_acc_mm_s2[0], 1.0)):
         points = np.zeros((t.size, 3))
         points[:, 0] = 0.5 * acc * t**2
         chunks = [points[:7], points[7:8], points[8:]]  # the differences span the chunks
-        assert slowdown_from_points(lim, chunks) == pytest.approx(expected, rel=1e-9)
+        speed, rest = slowdown_from_points(lim, chunks)
+        assert speed == 1.0 and rest == pytest.approx(expected, rel=1e-9)
+
+
+def test_the_slowdown_from_points_reads_the_path_speed_against_the_feed() -> None:
+    """Points along the diagonal of X and Y at 1.002 times the feed: each axis moves at 0.71 of
+    it, within its velocity limit, and the speed asked is the path's, 1.002; the accelerations
+    and jerks ask nothing."""
+    lim = dataclasses.replace(DEFAULT.limits, feed_mm_s=10.0)
+    step = 1.002 * lim.feed_mm_s * lim.period_s / np.sqrt(2.0)
+    points = np.zeros((20, 3))
+    points[:, 0] = points[:, 1] = step * np.arange(20)
+    speed, rest = slowdown_from_points(lim, [points])
+    assert speed == pytest.approx(1.002, rel=1e-12) and rest == 1.0
+
+
+def test_a_speed_above_the_feed_by_less_than_the_acceleration_margin_is_slowed(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Fuzz seed 58 (case 497): an envelope law at a programmed 0.1 mm/s stepped to 0.100101
+    mm/s, 0.1 % over, which the verification from the points let pass (its margin, 0.5 %, is
+    the accelerations') and the motion guard refused (its margin on a speed is 0.1 %). A speed
+    above the feed by more than half the guard's margin now slows the law by what it asks."""
+    import nurbsfeed.pipeline as pipeline
+
+    asked = iter([(1.001, 1.0), (1.0, 1.0)])
+    monkeypatch.setattr(pipeline, "slowdown_from_points", lambda lim, chunks: next(asked))
+    curve = NurbsCurve.build(3, [0, 0, 0, 0, 1, 1, 1, 1],
+                             [[0, 0, 0], [10, 5, 0], [20, -5, 0], [30, 0, 0]])
+    lim = DEFAULT.limits
+    plain = plan_curve(curve, lim)
+    plan = verified_plan(curve, lim, np.empty(0), np.empty(0))
+    assert plan.cycle_time_s >= 1.001 * plain.cycle_time_s * (1.0 - 1e-3)
+    assert plan.uniform_slowdown >= 1.001 * plain.uniform_slowdown
+
+
+def test_a_low_feed_leaves_its_rests_as_fast_as_the_scurve_plan() -> None:
+    """Fuzz seed 58 (case 497, at F60 here): the grid's first interval beside the start was 1.2
+    mm long, the last one beside the end short, and the nodes beside both rests were kept
+    within the shorter: the profile crept up over 1.2 mm at the start, and the rest cells,
+    sized for full speed (0.03 mm), took 0.06 s each to leave and reach a rest at 1 mm/s. Each
+    end has its own nodes now, the first no longer than constant jerk takes to reach the feed:
+    the envelope's plan is within 0.05 % of the S-curve plan (the feed all along, 23.165 s),
+    where it was 0.5 % slower."""
+    block = curve_blocks(DATA / "low-feed-start.json")[0]
+    plan = plan_curve(block.curve, DEFAULT.limits, block.feed_u, block.feed_mm_s)
+    scurve = plan_curve(block.curve, scurve_of(DEFAULT.limits), block.feed_u, block.feed_mm_s)
+    assert plan.planner == "envelope"
+    assert plan.cycle_time_s <= 1.0005 * scurve.cycle_time_s
 
 
 def test_a_stretch_of_one_node_between_two_rests_keeps_the_scurve_plan(tmp_path: Path) -> None:
@@ -292,5 +339,6 @@ def test_a_plan_above_a_limit_from_its_points_is_slowed_before_anything_is_writt
     for block in curve_blocks(DATA / name):
         plan = plan_block(block, DEFAULT)
         points = interpolate(plan, "rk2c").points
-        assert slowdown_from_points(
-            dataclasses.replace(plan.limits, feed_mm_s=np.inf), [points]) <= 1.005
+        speed, rest = slowdown_from_points(dataclasses.replace(plan.limits, feed_mm_s=np.inf),
+                                           [points])
+        assert speed <= 1.0 and rest <= 1.005

@@ -223,7 +223,7 @@ def envelope_schedule(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np
     whose coefficients coincide), where its schedule would last longer than MAX_LAW_PERIODS,
     or on a grid of more than MAX_NODES nodes (each takes about 2.5 kB of rows: a two-hour
     curve's 200,000 took 750 MB)."""
-    made = schedule_nodes(curve, grid, lim, rest_nodes)
+    made = schedule_nodes(curve, grid, lim, rest_nodes, v_limit)
     if made is None:
         return None
     rest_nodes, nodes = made
