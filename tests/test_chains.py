@@ -4,8 +4,7 @@ chains against the whole curve they were cut from.
 The reference is knot insertion (tests/cut_curves.py): a curve cut at its knots into pieces is
 the very same path, so a chain of the pieces must convert within 1 % of the whole curve's cycle,
 its points on the whole curve, and every axis's v / a / j measured from its positions within 2 %
-of the limit. The 1 % holds for the deterministic planners (the S-curve planner, paper-table1);
-the envelope planner's own cycle is noisier than that on the butterfly (ENVELOPE_NOISE_REL).
+of the limit.
 """
 
 from __future__ import annotations
@@ -39,11 +38,6 @@ ROOT = Path(__file__).resolve().parent.parent
 SAMPLES = ROOT / "samples"
 DEFAULT = load_machine("default")
 CYCLE_REL = 0.01  # the issue's bound: a chain within 1 % of the whole curve's cycle
-# The envelope planner's cycle on the butterfly moves by -0.9 % ... +2.1 % when its control
-# points move by 1e-15 of themselves, and by -0.8 % ... +4.4 % on knot-cut chains of 4 to 20
-# pieces that are the same curve to 3e-13 mm, merged and planned (docs/design.md §3b): a
-# chain can only be held to the whole curve within that
-ENVELOPE_NOISE_REL = 0.05
 POSITION_REL = 0.02  # v, a, j measured from positions within 2 % of each axis's limit
 
 
@@ -227,7 +221,7 @@ ZERO_MOVES = ["(joint)", "N7 G1 X{x} Y{y} F2400."]  # a zero-length G1 carrying 
 def test_a_chain_converts_as_the_whole_curve(tmp_path: Path, name: str, n: int, dialect: str,
                                            between: list[str] | None, profile: str) -> None:
     """N pieces in G06.2 / G6.2 blocks, with or without zero-length moves between: within 1 %
-    of the whole curve's cycle (the envelope planner: within its own noise, module docstring),
+    of the whole curve's cycle,
     every point on the whole curve, every axis's v, a, j from positions within 2 % of its
     limit, no rest at a joint, and the lines between the pieces where the motion crosses each
     joint."""
@@ -245,9 +239,7 @@ def test_a_chain_converts_as_the_whole_curve(tmp_path: Path, name: str, n: int, 
     text = gcode_chain(pieces, 12000.0, dialect, joint_lines)
     out, rows, cycle = _convert(tmp_path, "chain.nc", text, machine)
     assert out.count("(nurbsfeed: curves 0-") == 1  # one chain, one comment
-    bound = ENVELOPE_NOISE_REL if machine.limits.planner == "envelope" and name == (
-        "butterfly.json") else CYCLE_REL
-    assert cycle <= (1.0 + bound) * whole_cycle
+    assert cycle <= (1.0 + CYCLE_REL) * whole_cycle
     # the trace runs on across the chain: k from 0, curve the piece each point lies in
     k, curve, u, xyz = rows[:, 1], rows[:, 0].astype(int), rows[:, 3], rows[:, 8:11]
     assert np.array_equal(k, np.arange(len(rows)))
