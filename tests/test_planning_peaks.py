@@ -12,9 +12,9 @@ from click.testing import CliRunner
 from nurbsfeed.cli import main
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.geometry.nurbs import curvature_from_derivatives
+from nurbsfeed.geometry.peaks import near_cusp_peaks
 from nurbsfeed.interpolate import interpolate
 from nurbsfeed.machine import load_machine
-from nurbsfeed.planning.grid import _near_cusp_peaks
 from nurbsfeed.planning.planner import plan_curve
 from nurbsfeed.readers import read_program
 from tests.conftest import default_paper_limits
@@ -180,7 +180,7 @@ def test_a_hairpin_tighter_than_the_samples_is_passed_at_rest(curve: NurbsCurve,
 
 
 def test_a_near_cusp_needle_is_refined_to_its_peak() -> None:
-    """The refinement a near cusp that does not turn back gets (`_near_cusp_peaks`), given the
+    """The refinement a near cusp that does not turn back gets (`near_cusp_peaks`), given the
     samples the grid had around the needle: it finds the densely sampled peak."""
     u_peak, k_peak = hairpin_peak()
     samples = np.array([0.94458705, 0.94698661, 0.94938616, 0.95178571]) / 7
@@ -188,7 +188,7 @@ def test_a_near_cusp_needle_is_refined_to_its_peak() -> None:
     assert kappa.max() < 1e4 < k_peak  # the samples do not show it
     tip = densest(HAIRPIN, samples[1], samples[2], lambda u: -HAIRPIN.speed(u))
     knots, coef = HAIRPIN.knots, HAIRPIN.span_polynomials
-    (found,) = _near_cusp_peaks(knots, coef, HAIRPIN.degree, samples, kappa, np.array([tip]),
+    (found,) = near_cusp_peaks(knots, coef, HAIRPIN.degree, samples, kappa, np.array([tip]),
                                 1.0)
     assert kappa_at(HAIRPIN, np.array([found]))[0] >= k_peak * (1 - 1e-6)
 

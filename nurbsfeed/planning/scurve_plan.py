@@ -39,8 +39,9 @@ import numpy as np
 
 from nurbsfeed.errors import CurveError
 from nurbsfeed.geometry.nurbs import NurbsCurve, curvature_from_derivatives
+from nurbsfeed.geometry.peaks import first_at_or_above
 from nurbsfeed.jit import jit
-from nurbsfeed.planning.grid import Grid, build_grid, first_at_or_above
+from nurbsfeed.planning.grid import Grid, build_grid
 from nurbsfeed.planning.key_points import key_points
 from nurbsfeed.planning.limits import Limits, curvature_threshold, speed_limit
 from nurbsfeed.planning.path_check import least_cycle_s, path_excess, path_limit
