@@ -29,10 +29,10 @@ Building it, in order (`_grid_nodes`, compiled steps; then `simpson_lengths`):
       The ends of the curve are at rest anyway; a zero of C' there only blanks kappa.
    c. near cusps, where |C'| refines to a minimum close to 0 but not 0: kappa peaks there in a
       needle that neither neighbouring sample need show. One across which the path turns back
-      (`geometry.stops._near_cusp_turn`) is a hairpin, and a stop like a cusp: the stepping's arc position
-      runs a fraction of a micrometre off the law's between rests, enough to meet a tip of
-      nanometres before the law has slowed down for it. Any other is refined there and becomes
-      a peak (`geometry.peaks.near_cusp_peaks`).
+      (`geometry.stops._near_cusp_turn`) is a hairpin, and a stop like a cusp: the stepping's
+      arc position runs a fraction of a micrometre off the law's between rests, enough to meet
+      a tip of nanometres before the law has slowed down for it. Any other is refined there and
+      becomes a peak (`geometry.peaks.near_cusp_peaks`).
 4. The maxima, corners and caller's parameters are merged in as nodes; then every interval
    across which kappa jumps is halved, a few times over.
 5. Arc length by adaptive Simpson between consecutive nodes (geometry.arclength).
