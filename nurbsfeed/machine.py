@@ -75,7 +75,7 @@ INT_KEYS = ("decimals", "feed_decimals", "move_periods")
 JERK_MODELS = ("paper", "path")  # profile key jerk_model (planning.path_model)
 # profile key planner: the paper's key points and S-curves, or planning.optimal or
 # planning.envelope (path model)
-PLANNERS = ("scurve", "optimal", "envelope")
+PLANNERS = ("scurve", "optimal", "envelope", "path")
 OPTIMAL_NEEDS_SCIPY = ("planner: optimal needs scipy (its linear programs): "
                        "pip install 'nurbsfeed[optimal]'")
 # The accepted values, ends included (docs/profiles.md says why each is physical).
@@ -206,7 +206,7 @@ def machine_from_mapping(data: Any, where: str, places: Mapping[str, Location] |
         raise _refused(f"per-axis limits ({', '.join(axis_given)}) hold only under "
                        "jerk_model: path (the paper's model limits the path alone)",
                        (*axis_given, "jerk_model"), places, overrides, here)
-    if planner in ("optimal", "envelope") and jerk_model != "path":
+    if planner in ("optimal", "envelope", "path") and jerk_model != "path":
         raise _refused(f"planner: {planner} plans under jerk_model: path only (the paper's planner "
                        "is the paper's model's)", ("planner", "jerk_model"), places, overrides,
                        here)

@@ -40,6 +40,40 @@ from nurbsfeed.planning.scurve_plan import scurve_plan
 def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
                feed_mm_s: np.ndarray = np.empty(0), max_curve_time_s: float = math.inf,
                extra_slowdown: float = 1.0) -> Plan:
+    if lim.planner == "path":
+        plan = _path_plan(curve, lim, feed_u, feed_mm_s, max_curve_time_s, extra_slowdown)
+        if plan is not None:
+            return plan
+        return scurve_plan(curve, lim, feed_u, feed_mm_s, max_curve_time_s, extra_slowdown)
+    return _plan_curve(curve, lim, feed_u, feed_mm_s, max_curve_time_s, extra_slowdown)
+
+
+def _path_plan(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s: np.ndarray,
+               max_curve_time_s: float, extra_slowdown: float) -> Plan | None:
+    from nurbsfeed.planning.path_plan import plan_path
+
+    feed_breaks = feed_u[1:] if feed_u.size else feed_u
+    kappa0 = curvature_threshold(lim)
+    grid = build_grid(curve, grid_spacing(curve, lim), feed_breaks, kappa0)
+    fcap = feed_at(grid.u, feed_u, feed_mm_s)
+    least = least_cycle_s(curve, grid, lim, fcap)
+    if not least <= max_curve_time_s:
+        raise CurveError(too_long(least, max_curve_time_s, least=True))
+    limit, _ = path_limit(curve, grid, lim, speed_limit(grid.kappa_1_mm, lim, fcap))
+    made = plan_path(curve, grid, lim, limit, lambda u: feed_at(u, feed_u, feed_mm_s),
+                     feed_breaks, extra_slowdown)
+    if made is None:
+        return None
+    n_peaks = int(np.count_nonzero(grid.kappa_1_mm[grid.peak_index] >= kappa0))
+    acc, jerk = scurve_limits(lim, np.ptp(curve.points, axis=0) > 0.0)
+    plan = _schedule_plan(curve, lim, grid, kappa0, n_peaks, made.kinds, made, acc, jerk)
+    if not plan.cycle_time_s <= max_curve_time_s:
+        raise CurveError(too_long(plan.cycle_time_s, max_curve_time_s))
+    return plan
+
+
+def _plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s: np.ndarray,
+                max_curve_time_s: float, extra_slowdown: float) -> Plan:
     """Plan the feed along one curve under `lim` (feed cap already in lim.feed_mm_s).
     extra_slowdown: a uniform slowdown the law takes on top of its own (the pipeline's check
     from the points asks for it, `pipeline.verified_plan`).

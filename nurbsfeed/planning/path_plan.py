@@ -1,0 +1,76 @@
+"""The path planner's plan of one curve (`planner: optimal`, design §2e): the planning grid,
+its rests, the cells, the schedule, the law.
+
+    grid (planning.grid) -> rests -> cells (planning.cells) -> schedule (planning.schedule:
+    linear programs over b = v^2) -> law at the periods (planning.schedule_law)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from nurbsfeed.geometry.nurbs import NurbsCurve
+from nurbsfeed.planning.cells import build_layout, schedule_nodes
+from nurbsfeed.planning.grid import Grid
+from nurbsfeed.planning.limits import Limits
+from nurbsfeed.planning.plan import KIND_CORNER, KIND_CUSP, KIND_END
+from nurbsfeed.planning.schedule import plan_schedule
+from nurbsfeed.planning.schedule_law import schedule_law
+from nurbsfeed.planning.timelaw import TimeLaw
+
+# past this many periods a curve keeps the S-curve plan, whose pieces do not grow with its
+# duration (the law holds a piece a period)
+MAX_LAW_PERIODS = 1_000_000
+
+
+@dataclass(frozen=True, eq=False)
+class PathSchedule:
+    """What planning.planner makes a Plan of: the law (whole periods per stretch, every
+    slowdown applied), the slowdown the schedule's own check asked for (>= 1), the linear
+    programs solved, the grid nodes (R,) the motion rests at and their kinds (R,)."""
+
+    law: TimeLaw
+    slowdown: float
+    rounds: int
+    rest_nodes: np.ndarray
+    kinds: np.ndarray
+
+
+def rest_nodes(grid: Grid, limit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The grid nodes (R,) where every plan rests, ascending, and their kinds (R,): the ends,
+    the grid's stops (a corner or, where the tangent turns back, a cusp), nodes of infinite
+    curvature and nodes whose pointwise limit limit (M,) is 0."""
+    last = grid.u.size - 1
+    kind = np.full(grid.u.size, -1, dtype=np.int64)
+    kind[~(limit > 0.0)] = KIND_CORNER
+    kind[np.isinf(grid.kappa_1_mm)] = KIND_CORNER
+    stops = np.asarray(grid.stop_index, dtype=np.int64)
+    kind[stops] = np.where(np.asarray(grid.stop_cos) < 0.0, KIND_CUSP, KIND_CORNER)
+    kind[[0, last]] = KIND_END
+    nodes = np.flatnonzero(kind >= 0)
+    return nodes, kind[nodes]
+
+
+def plan_path(curve: NurbsCurve, grid: Grid, lim: Limits, limit: np.ndarray,
+              feed_at_u: Callable[[np.ndarray], np.ndarray], feed_breaks: np.ndarray,
+              extra_slowdown: float = 1.0) -> PathSchedule | None:
+    """The schedule of `curve` on `grid` under `lim` (path model); limit (M,): the pointwise
+    speed limit at the grid's nodes (no motion is faster there); feed_breaks: the parameters
+    where the programmed feed changes; None where it cannot plan (a
+    stretch of no length between two rests, a law above MAX_LAW_PERIODS periods)."""
+    rests, kinds = rest_nodes(grid, limit)
+    if rests.size < 2 or not np.all(np.diff(grid.s_mm[rests]) > 0.0):
+        return None
+    v_limit = np.where(np.isfinite(limit), limit, lim.feed_mm_s)
+    s_mm, u, rest = schedule_nodes(curve, grid, lim, rests, v_limit, feed_breaks)
+    if int(rest.sum()) != rests.size:
+        return None
+    layout = build_layout(curve, grid, lim, s_mm, u, rest, feed_at_u)
+    schedule = plan_schedule(layout, lim)
+    if not schedule.cycle_s * schedule.slowdown * extra_slowdown < MAX_LAW_PERIODS * lim.period_s:
+        return None
+    law, _ = schedule_law(schedule, lim.period_s, extra_slowdown)
+    return PathSchedule(law, schedule.slowdown * extra_slowdown, schedule.programs, rests, kinds)

@@ -1,0 +1,147 @@
+"""The time law of a schedule (planning.schedule): where it is at every period, as the
+constant-jerk pieces the interpolator reads (planning.timelaw).
+
+Each stretch between rests runs in a whole number of periods: its duration D is stretched to
+n = ceil(D slowdown / T) periods (time scaled by lambda = n T / D >= 1: v / lambda, a /
+lambda^2, jerk / lambda^3, every limit kept). At every period k the schedule's own arc s_k and
+speed v_k are found (the cell by its start time, then Newton's method on the cell's time: a
+rest cell's in closed form, b = b_far y^(4/3) takes t = 3 h y^(1/3) / sqrt(b_far)), and one
+piece joins each period to the next through s and v at both ends (a cubic Hermite in time):
+the positions at the periods are the schedule's, and the law's acceleration and jerk inside a
+period the cubic's, what `plan` and the trace show.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from nurbsfeed.jit import jit
+from nurbsfeed.planning.cells import point_weights
+from nurbsfeed.planning.schedule import Schedule, cell_times
+from nurbsfeed.planning.timelaw import TimeLaw
+
+NEWTON_STEPS = 30
+GAUSS_X, GAUSS_W = np.polynomial.legendre.leggauss(6)
+
+
+@jit
+def _cell_time_to(c, cells, q, x):
+    """The time from inner cell q's start to share x of it, and b there (Gauss-Legendre)."""
+    w = np.empty((3, 3))
+    i0 = int(cells[q, 0])
+    h = cells[q, 4]
+    t = 0.0
+    for g in range(GAUSS_X.size):
+        xg = 0.5 * x * (GAUSS_X[g] + 1.0)
+        point_weights(cells[q, 1], cells[q, 2], cells[q, 3], h, xg, w)
+        b = w[0, 0] * c[i0] + w[0, 1] * c[i0 + 1] + w[0, 2] * c[i0 + 2]
+        t += GAUSS_W[g] / math.sqrt(max(b, 1e-300))
+    point_weights(cells[q, 1], cells[q, 2], cells[q, 3], h, x, w)
+    b = w[0, 0] * c[i0] + w[0, 1] * c[i0 + 1] + w[0, 2] * c[i0 + 2]
+    return 0.5 * x * h * t, max(b, 0.0)
+
+
+@jit
+def _sample_stretch(c, cells, cell_node, q_first, q_last, s_nodes, node0, node1, times, rest_t,
+                    rest_h, b_far, scale, n, out_s, out_v):
+    """s and v (n + 1,) at the n + 1 period instants of one stretch, its time stretched by
+    scale (schedule time = law time / scale). Cells q_first..q_last (inner), the rest cells'
+    durations rest_t (2,), lengths rest_h (2,), far values b_far (2,); s_nodes: the nodes' arc,
+    cell_node: each cell's first node, node0 and node1: the stretch's rests."""
+    total = rest_t[0] + rest_t[1]
+    for q in range(q_first, q_last + 1):
+        total += times[q]
+    step = total / n
+    q = q_first
+    t_cell = rest_t[0]  # the schedule time at which cell q starts
+    x = 0.5
+    s_start = s_nodes[node0]
+    s_end = s_nodes[node1]
+    for k in range(n + 1):
+        t = k * step
+        if k == 0:
+            out_s[k] = s_start
+            out_v[k] = 0.0
+            continue
+        if k == n:
+            out_s[k] = s_end
+            out_v[k] = 0.0
+            continue
+        if t <= rest_t[0]:  # the rest cell at the start: y = (t sqrt(b) / (3 h))^3
+            y = (t * math.sqrt(b_far[0]) / (3.0 * rest_h[0])) ** 3
+            out_s[k] = s_start + rest_h[0] * y
+            out_v[k] = math.sqrt(b_far[0] * y ** (4.0 / 3.0)) / scale
+            continue
+        if t >= total - rest_t[1]:  # the rest cell at the end
+            y = ((total - t) * math.sqrt(b_far[1]) / (3.0 * rest_h[1])) ** 3
+            out_s[k] = s_end - rest_h[1] * y
+            out_v[k] = math.sqrt(b_far[1] * y ** (4.0 / 3.0)) / scale
+            continue
+        while q < q_last and t >= t_cell + times[q]:
+            t_cell += times[q]
+            q += 1
+            x = 0.5
+        tau = min(max(t - t_cell, 0.0), times[q])
+        # Newton on the cell's time, bracketed
+        lo, hi = 0.0, 1.0
+        b = 0.0
+        for _ in range(NEWTON_STEPS):
+            tx, b = _cell_time_to(c, cells, q, x)
+            f = tx - tau
+            if f > 0.0:
+                hi = x
+            else:
+                lo = x
+            dx = -f * math.sqrt(max(b, 1e-300)) / cells[q, 4]
+            nx = x + dx
+            if not lo < nx < hi:
+                nx = 0.5 * (lo + hi)
+            if abs(nx - x) <= 1e-15 or hi - lo <= 1e-15:
+                x = nx
+                break
+            x = nx
+        _, b = _cell_time_to(c, cells, q, x)
+        out_s[k] = s_nodes[cell_node[q]] + x * cells[q, 4]
+        out_v[k] = math.sqrt(b) / scale
+
+
+def schedule_law(schedule: Schedule, period_s: float, extra_slowdown: float = 1.0
+                 ) -> tuple[TimeLaw, np.ndarray]:
+    """The law (module docstring), and the time (R,) it passes each rest."""
+    lay = schedule.layout
+    times = np.empty(lay.cells.shape[0] + 2 * lay.first.size)
+    cell_times(schedule.c, lay.cells, lay.first, lay.last, lay.rest_h, times)
+    q_n = lay.cells.shape[0]
+    rests = np.flatnonzero(lay.rest)
+    slow = schedule.slowdown * extra_slowdown
+    parts: list[list[np.ndarray]] = [[] for _ in range(5)]
+    key_t = [0.0]
+    q0 = 0
+    for s in range(lay.first.size):
+        n_cells = lay.last[s] - lay.first[s] - 1
+        q1 = q0 + n_cells - 1
+        rest_t = times[q_n + 2 * s:q_n + 2 * s + 2].copy()
+        duration = float(rest_t.sum() + times[q0:q1 + 1].sum())
+        n = max(2, math.ceil(duration * slow / period_s * (1.0 - 1e-12)))
+        scale = n * period_s / duration
+        s_k = np.empty(n + 1)
+        v_k = np.empty(n + 1)
+        b_far = np.array([schedule.c[lay.first[s]], schedule.c[lay.last[s]]])
+        _sample_stretch(schedule.c, lay.cells, lay.cell_node, q0, q1, lay.s_mm, rests[s],
+                        rests[s + 1], times, rest_t, lay.rest_h[s].copy(), b_far, scale, n,
+                        s_k, v_k)
+        s_k = np.maximum.accumulate(s_k)
+        gain = np.diff(s_k)
+        c2 = (3.0 * gain - period_s * (2.0 * v_k[:-1] + v_k[1:])) / period_s**2
+        c3 = (-2.0 * gain + period_s * (v_k[:-1] + v_k[1:])) / period_s**3
+        start = key_t[-1]
+        t0 = start + np.arange(n) * period_s
+        for out, value in zip(parts, (t0, s_k[:-1], v_k[:-1], 2.0 * c2, 6.0 * c3)):
+            out.append(value)
+        key_t.append(start + n * period_s)
+        q0 = q1 + 1
+    key = np.array(key_t)
+    law = TimeLaw.from_pieces(*(np.concatenate(p) for p in parts), key, float(key[-1]))
+    return law, key
