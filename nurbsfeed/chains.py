@@ -36,8 +36,8 @@ from nurbsfeed.program import MM_PER_UNIT, CurveBlock, PassThrough, ProgramItem
 
 MAX_WINDOW_CURVES = 400
 # the planner's grid nodes a window is expected to need (its length over the grid spacing at
-# full feed): the near-optimal schedule takes up to 40,000 (planning.optimal) and the grid
-# refines around curvature peaks, so a window stays well below that
+# full feed): the grid refines around curvature peaks, and the planner's programs grow with
+# the nodes
 MAX_WINDOW_NODES = 12_000
 MAX_GAP_LINES = 1000
 

@@ -8,7 +8,6 @@ stepping loop and the writer compute with in finite numbers.
 
 from __future__ import annotations
 
-import importlib.util
 import math
 import re
 from collections.abc import Mapping
@@ -73,11 +72,11 @@ FLOAT_KEYS = (REQUIRED_KEYS + ("max_curve_time_s", "min_block_time_s", "rest_mov
               + tuple(AXIS_KEYS))
 INT_KEYS = ("decimals", "feed_decimals", "move_periods")
 JERK_MODELS = ("paper", "path")  # profile key jerk_model (planning.path_model)
-# profile key planner: the paper's key points and S-curves, or planning.optimal or
-# planning.envelope (path model)
-PLANNERS = ("scurve", "optimal", "envelope", "path")
-OPTIMAL_NEEDS_SCIPY = ("planner: optimal needs scipy (its linear programs): "
-                       "pip install 'nurbsfeed[optimal]'")
+# profile key planner: the paper's key points and S-curves, or the path model's linear
+# programs (planning.schedule); "envelope", the path model's planner before them, plans as
+# "optimal" (a profile written for it keeps working)
+PLANNERS = ("scurve", "optimal", "envelope")
+PLANNER_ALIASES = {"envelope": "optimal"}
 # The accepted values, ends included (docs/profiles.md says why each is physical).
 RANGES: dict[str, tuple[float, float]] = {
     "period_s": (1e-6, 1.0),
@@ -176,6 +175,7 @@ def machine_from_mapping(data: Any, where: str, places: Mapping[str, Location] |
             raise ProfileError(f"missing key '{key}'", here)
     jerk_model = _choice(data, "jerk_model", JERK_MODELS, places, overrides, here)
     planner = _choice(data, "planner", PLANNERS, places, overrides, here)
+    planner = PLANNER_ALIASES.get(planner, planner)
     for key, value in (overrides or {}).items():
         if key in ("jerk_model", "planner"):
             continue
@@ -206,12 +206,10 @@ def machine_from_mapping(data: Any, where: str, places: Mapping[str, Location] |
         raise _refused(f"per-axis limits ({', '.join(axis_given)}) hold only under "
                        "jerk_model: path (the paper's model limits the path alone)",
                        (*axis_given, "jerk_model"), places, overrides, here)
-    if planner in ("optimal", "envelope", "path") and jerk_model != "path":
+    if planner == "optimal" and jerk_model != "path":
         raise _refused(f"planner: {planner} plans under jerk_model: path only (the paper's planner "
                        "is the paper's model's)", ("planner", "jerk_model"), places, overrides,
                        here)
-    if planner == "optimal" and importlib.util.find_spec("scipy") is None:
-        raise _refused(OPTIMAL_NEEDS_SCIPY, ("planner",), places, overrides, here)
     axis: dict[str, list[float]] = {field: [math.inf] * 3 for field, _ in AXIS_KEYS.values()}
     for key in axis_given:
         field, i = AXIS_KEYS[key]

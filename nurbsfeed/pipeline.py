@@ -85,7 +85,7 @@ class FileReport:
         return sum(c.cycle_time_s for c in self.curves)
 
 
-# the envelope planner's points read as positions (plan_block): the excess they may show, and the
+# the path planner's points read as positions (plan_block): the excess they may show, and the
 # uniform slowdowns that take it back before the S-curve planner plans the curve instead
 POSITION_REL = 0.005
 # half the motion guard's allowance on a speed; the stepping's own error (1e-5) stays below it
@@ -116,13 +116,12 @@ def verified_plan(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s:
     speed or an axis's velocity is above its limit by more than POSITION_SPEED_REL, or an axis's
     acceleration or jerk, or the jerk vector, by more than POSITION_REL, the law is slowed
     uniformly by what they ask (POSITION_ROUNDS times at most). The speeds are held closer: the
-    motion guard allows them GUARD_FEED_REL (0.1 %), less than POSITION_REL (fuzz seed 58: an
-    envelope law at a 0.1 mm/s feed stepped to 0.100101 mm/s, and the guard refused the valid
-    program).
-    An envelope plan still above then gives way to the S-curve plan, read the same way: the
-    one bounded fallback. A plan still above after all that goes on to the motion guard, which
+    motion guard allows them GUARD_FEED_REL (0.1 %), less than POSITION_REL (a law at a
+    0.1 mm/s feed stepped to 0.100101 mm/s would be refused as a valid program).
+    A path plan still above then gives way to the S-curve plan, read the same way: the one
+    bounded fallback. A plan still above after all that goes on to the motion guard, which
     refuses it (exit 2, located, nothing written)."""
-    planners = [lim.planner] + (["scurve"] if lim.planner == "envelope" else [])
+    planners = [lim.planner] + (["scurve"] if lim.planner == "optimal" else [])
     plan = plan_curve(curve, lim, feed_u, feed_mm_s, max_curve_time_s)
     if lim.jerk_model != "path":  # the paper model's jerk limits are the law's and a proxy
         return plan

@@ -5,8 +5,9 @@ pentadiagonal, so each iteration costs O(rows).
     minimize f . x   subject to   a_r . x[i_r : i_r + 3] <= rhs_r  (each row r),  0 <= x <= u
 
 Rows are given as (i_r, a_r (3,), rhs_r); variables with u = 0 are fixed at 0 (their columns
-may still appear in rows). The solver works on x / u (every variable in [0, 1]) and on rows
-scaled to a largest coefficient of 1.
+may still appear in rows). The solver works on y = x / scale (scale: the size each variable is
+expected to take, not its bound: a variable far below its bound would otherwise take rows
+scaled by the others) and on rows scaled to a largest coefficient of 1.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import numpy as np
 from nurbsfeed.jit import jit
 
 MAX_ITER = 80
-TOL_GAP = 1e-10  # the mean complementarity
+TOL_GAP = 1e-8  # the mean complementarity
 TOL_FEAS = 1e-7  # primal residual (rows scaled to a largest coefficient of 1)
 TOL_DUAL = 1e-6  # dual residual (the objective scaled to a largest coefficient of 1)
 STEP_SHARE = 0.995  # of the longest step keeping s, z > 0
@@ -70,31 +71,48 @@ def _penta_solve(d0, d1, d2, rhs, n, out):
 
 
 @jit
-def solve_lp(n, ridx, rval, rhs, f, u, x_start, hist):
+def solve_lp(n, ridx, rval, rhs, f, u, scale, x_start, hist):
     """The LP of the module docstring; returns (x (n,), status): 0 solved, 1 iterations ran
     out (x is the last iterate, possibly infeasible), 2 numerical failure."""
-    m = ridx.size
+    # rows the box implies (|a . x| <= sum |a_j| u_j <= rhs for every x in it) are left out: a
+    # row whose coefficients are rounding noise would otherwise scale to an enormous bound
+    m_all = ridx.size
+    take = np.empty(m_all, dtype=np.int64)
+    m = 0
+    for r in range(m_all):
+        reach = 0.0
+        for j in range(3):
+            k = ridx[r] + j
+            if k < n:
+                reach += abs(rval[r, j]) * u[k]
+        if reach > rhs[r]:
+            take[m] = r
+            m += 1
     # scaling: x = u * y, rows divided by their largest coefficient (in y)
     a = np.empty((m, 3))
     b = np.empty(m)
-    for r in range(m):
+    rows = np.empty(m, dtype=np.int64)
+    for q in range(m):
+        r = take[q]
+        rows[q] = ridx[r]
         big = 0.0
         for j in range(3):
             k = ridx[r] + j
-            v = rval[r, j] * (u[k] if k < n else 0.0)
-            a[r, j] = v
+            v = rval[r, j] * (scale[k] if k < n and u[k] > 0.0 else 0.0)
+            a[q, j] = v
             big = max(big, abs(v))
-        if big == 0.0:
-            big = 1.0
         for j in range(3):
-            a[r, j] /= big
-        b[r] = rhs[r] / big
+            a[q, j] /= big
+        b[q] = rhs[r] / big
+    ridx = rows
     free = np.empty(n, dtype=np.bool_)
+    top = np.empty(n)  # the box in y: u / scale
     g = np.empty(n)
     fscale = 0.0
     for i in range(n):
         free[i] = u[i] > 0.0
-        g[i] = f[i] * u[i]
+        top[i] = u[i] / scale[i] if free[i] else 0.0
+        g[i] = f[i] * scale[i]
         fscale = max(fscale, abs(g[i]))
     if fscale == 0.0:
         fscale = 1.0
@@ -104,7 +122,7 @@ def solve_lp(n, ridx, rval, rhs, f, u, x_start, hist):
     y = np.empty(n)
     for i in range(n):
         if free[i]:
-            y[i] = min(max(x_start[i] / u[i], 0.05), 0.95)
+            y[i] = min(max(x_start[i] / scale[i], 0.05 * top[i]), 0.95 * top[i])
         else:
             y[i] = 0.0
     s = np.empty(m)
@@ -127,7 +145,7 @@ def solve_lp(n, ridx, rval, rhs, f, u, x_start, hist):
     zl = np.ones(n)
     zu = np.ones(n)
     sl = y.copy()
-    su = 1.0 - y
+    su = top - y
     for i in range(n):
         if not free[i]:
             sl[i] = 1.0
@@ -356,5 +374,5 @@ def solve_lp(n, ridx, rval, rhs, f, u, x_start, hist):
         status = 0
     x = np.empty(n)
     for i in range(n):
-        x[i] = min(max(y[i], 0.0), 1.0) * u[i] if free[i] else 0.0
+        x[i] = min(max(y[i], 0.0), top[i]) * scale[i] if free[i] else 0.0
     return x, status

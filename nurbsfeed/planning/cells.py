@@ -48,12 +48,17 @@ G_KAPPA, G_T, G_K, G_KS, G_D, G_CAP = 0, 1, 4, 7, 10, 13
 G_SIZE = 14
 POINTS = (0.0, 0.5, 1.0)  # where a cell's limits are read: its start, middle and end
 
-CELL_PERIODS = 4.0  # a cell in which the pointwise limit would spend longer is cut
-# a grid node closer than this many periods at the pointwise limit to the last one kept goes
+CELL_PERIODS = 4.0  # a cell lasting longer at the speed estimate is cut
+# a grid node closer than this many periods at the speed estimate to the last one kept goes
 # (curvature maxima, knots, stops and the ends always stay): cells far shorter than a period
-# are finer than anything the machine's positions show, and they make rows that ask b'' to
-# follow 2 kappa^2 b to a millionth (a 3 um near cusp), beyond what the programs resolve
-MIN_CELL_PERIODS = 0.25
+# are finer than anything the machine's positions show, they make rows that ask b'' to
+# follow 2 kappa^2 b to a millionth (a 3 um near cusp), beyond what the programs resolve, and
+# each costs the programs as much as a long one
+MIN_CELL_PERIODS = 1.0
+# ... unless the curvature across the merged cell changes by more than this factor (kappa
+# below kappa_0, where it sets no limit, counts as kappa_0): in a valley the rows must see the
+# curvature change to plan its bottom
+MERGE_KAPPA_RATIO = 1.25
 MIN_CELL_REL = 1e-9  # of the curve's length: nodes closer than this are one
 MIN_STRETCH_CELLS = 4  # a stretch between rests has at least this many cells
 REST_CELL_SHARE = 0.05  # of A^3 / (6 J^2): the first cell beside a rest at most ...
@@ -80,6 +85,7 @@ class Layout:
     knot_w: np.ndarray
     width: np.ndarray
     cap: np.ndarray
+    b_estimate: np.ndarray  # (C,) b of the speed estimate (no schedule is faster): a scale
     first: np.ndarray
     last: np.ndarray
     rest_h: np.ndarray  # (S, 2)
@@ -93,28 +99,57 @@ class Layout:
         return self.xi.size
 
 
+def speed_estimate(s_mm: np.ndarray, cap_mm_s: np.ndarray, acc_mm_s2: float,
+                   rest: np.ndarray) -> np.ndarray:
+    """The fastest speed (N,) at the points s_mm (N,) under the caps cap_mm_s (N,) and one
+    acceleration limit, at rest where rest (N,): the forward and backward passes of
+    time-optimal path parametrisation, b' <= 2 A. No motion that keeps the limits is faster
+    (jerk only slows it), which sizes the cells."""
+    b = np.where(rest, 0.0, np.minimum(cap_mm_s, 1e300) ** 2)
+    _topp_passes(b, np.diff(s_mm), 2.0 * acc_mm_s2)
+    return np.sqrt(b)
+
+
+@jit
+def _topp_passes(b, h, slope):
+    for i in range(1, b.size):
+        b[i] = min(b[i], b[i - 1] + slope * h[i - 1])
+    for i in range(b.size - 2, -1, -1):
+        b[i] = min(b[i], b[i + 1] + slope * h[i])
+
+
 def schedule_nodes(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.ndarray,
-                   v_limit: np.ndarray, keep_u: np.ndarray = np.empty(0)
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   cap_mm_s: np.ndarray, kappa_floor: float,
+                   keep_u: np.ndarray = np.empty(0)
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The nodes (s_mm, u, rest) (M,) of the schedule from the grid's, resting at grid nodes
-    rest_nodes (R,) (the ends first and last); v_limit (N,): a speed no motion exceeds at the
-    grid's nodes; keep_u: parameters whose nodes stay (where the programmed feed changes)
-    (module docstring)."""
+    rest_nodes (R,) (the ends first and last); cap_mm_s (N,): the speed caps at the grid's
+    nodes; kappa_floor: the curvature below which the caps do not depend on it (kappa_0);
+    keep_u: parameters whose nodes stay (where the programmed feed changes) (module docstring).
+    Also the speed estimate (M,) at the nodes (`speed_estimate`)."""
     s_mm, u = np.asarray(grid.s_mm, dtype=float), np.asarray(grid.u, dtype=float)
     rest = np.zeros(s_mm.size, dtype=bool)
     rest[rest_nodes] = True
+    v_limit = speed_estimate(s_mm, np.asarray(cap_mm_s, dtype=float),
+                             _moving_limits(curve, lim)[0], rest)
+    v_limit = np.maximum(v_limit, np.where(rest, 0.0, 1e-300))
     essential = rest.copy()
     essential[grid.peak_index] = True
     essential[np.isin(u, curve.span_breaks)] = True
     essential[np.isin(u, keep_u)] = True
     floor = MIN_CELL_REL * max(float(s_mm[-1]), 1e-300)
     short = np.maximum(MIN_CELL_PERIODS * lim.period_s * np.asarray(v_limit, dtype=float), floor)
+    kappa = np.maximum(np.nan_to_num(grid.kappa_1_mm, posinf=1e300), kappa_floor)
     keep = np.ones(s_mm.size, dtype=bool)
     kept = 0
+    lo_k = hi_k = kappa[0]
     for k in range(1, s_mm.size):
         gap = s_mm[k] - s_mm[kept]
-        if gap >= floor and (essential[k] or gap >= min(short[k], short[kept])):
+        lo_k, hi_k = min(lo_k, kappa[k]), max(hi_k, kappa[k])
+        if gap >= floor and (essential[k] or gap >= min(short[k], short[kept])
+                             or hi_k > MERGE_KAPPA_RATIO * lo_k):
             kept = k
+            lo_k = hi_k = kappa[k]
         elif (k == s_mm.size - 1 or rest[k]) and kept > 0 and not rest[kept]:
             keep[kept] = False  # a rest and the end stay: the node before them goes
             kept = k
@@ -148,7 +183,9 @@ def schedule_nodes(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.nd
         cut = [s_mm[i] + h[i] * np.arange(1, n) / n
                for i, n in zip(np.flatnonzero(long), parts[long].astype(np.int64))]
         s_mm, u, rest, v = _insert(curve, grid, s_mm, u, rest, v, cut)
-    return s_mm, u, rest
+    # the estimate again on the nodes (inserted ones took theirs by interpolation)
+    cap = np.interp(s_mm, grid.s_mm, np.asarray(cap_mm_s, dtype=float))
+    return s_mm, u, rest, speed_estimate(s_mm, cap, _moving_limits(curve, lim)[0], rest)
 
 
 def _insert(curve: NurbsCurve, grid: Grid, s_mm: np.ndarray, u: np.ndarray, rest: np.ndarray,
@@ -221,9 +258,11 @@ def _knot_index(curve: NurbsCurve, u: np.ndarray) -> np.ndarray:
 
 
 def build_layout(curve: NurbsCurve, grid: Grid, lim: Limits, s_mm: np.ndarray, u: np.ndarray,
-                 rest: np.ndarray, feed_at_u: Callable[[np.ndarray], np.ndarray]) -> Layout:
-    """The layout of nodes (s_mm, u, rest) (M,) (`schedule_nodes`): the spline's coefficients,
-    its inner cells and the geometry at their points, the caps on the coefficients."""
+                 rest: np.ndarray, v_estimate: np.ndarray,
+                 feed_at_u: Callable[[np.ndarray], np.ndarray]) -> Layout:
+    """The layout of nodes (s_mm, u, rest) (M,) (`schedule_nodes`, with its speed estimate
+    v_estimate (M,)): the spline's coefficients, its inner cells and the geometry at their
+    points, the caps on the coefficients."""
     rests = np.flatnonzero(rest)
     xi, kw, width, first, last, rest_h, ratio = [], [], [], [], [], [], []
     cells, cell_node = [], []
@@ -270,8 +309,10 @@ def build_layout(curve: NurbsCurve, grid: Grid, lim: Limits, s_mm: np.ndarray, u
     for s in range(first_a.size):
         cap[first_a[s]] = min(cap[first_a[s]], rc[s, 0], cap[first_a[s] + 1] / ratio_a[s, 0])
         cap[last_a[s]] = min(cap[last_a[s]], rc[s, 1], cap[last_a[s] - 1] / ratio_a[s, 1])
-    arrays = (s_mm, u, rest, xi_all, kw_all, np.concatenate(width), cap, first_a, last_a,
-              rest_h_a, ratio_a, cells_arr, node, geo3)
+    b_estimate = np.minimum(np.interp(xi_all, s_mm, np.asarray(v_estimate, dtype=float) ** 2),
+                            cap)
+    arrays = (s_mm, u, rest, xi_all, kw_all, np.concatenate(width), cap, b_estimate, first_a,
+              last_a, rest_h_a, ratio_a, cells_arr, node, geo3)
     for arr in arrays:
         arr.setflags(write=False)
     return Layout(*arrays)

@@ -35,6 +35,18 @@ def least_cycle_s(curve: NurbsCurve, grid: Grid, lim: Limits, fcap: np.ndarray) 
     return float(np.sum(np.maximum(np.diff(grid.s_mm) / cap, axis_s)))
 
 
+def axis_capped(curve: NurbsCurve, grid: Grid, lim: Limits, cap: np.ndarray) -> np.ndarray:
+    """The speed caps cap (M,) at the grid's nodes lowered by each axis's velocity limit."""
+    tangent = frames(curve, grid.u).tangent
+    out = np.minimum(np.asarray(cap, dtype=float), lim.feed_mm_s)
+    with np.errstate(divide="ignore"):
+        for x in range(3):
+            tx = np.abs(tangent[:, x])
+            out = np.minimum(out, np.where(tx > 0.0, lim.axis_vel_mm_s[x]
+                                           / np.where(tx > 0.0, tx, 1.0), np.inf))
+    return out
+
+
 def _binding_minima(limit: np.ndarray, raw_limit: np.ndarray) -> np.ndarray:
     """Nodes where the path model's own terms set the limit (below the paper's raw limit) and
     it is low: the lowest of MINIMUM_WINDOW nodes on each side (stops, limit 0, aside), with

@@ -15,7 +15,7 @@ import numpy as np
 from nurbsfeed.geometry.nurbs import NurbsCurve
 from nurbsfeed.planning.cells import build_layout, schedule_nodes
 from nurbsfeed.planning.grid import Grid
-from nurbsfeed.planning.limits import Limits
+from nurbsfeed.planning.limits import Limits, curvature_threshold
 from nurbsfeed.planning.plan import KIND_CORNER, KIND_CUSP, KIND_END
 from nurbsfeed.planning.schedule import plan_schedule
 from nurbsfeed.planning.schedule_law import schedule_law
@@ -54,21 +54,23 @@ def rest_nodes(grid: Grid, limit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return nodes, kind[nodes]
 
 
-def plan_path(curve: NurbsCurve, grid: Grid, lim: Limits, limit: np.ndarray,
+def plan_path(curve: NurbsCurve, grid: Grid, lim: Limits, limit: np.ndarray, cap: np.ndarray,
               feed_at_u: Callable[[np.ndarray], np.ndarray], feed_breaks: np.ndarray,
               extra_slowdown: float = 1.0) -> PathSchedule | None:
     """The schedule of `curve` on `grid` under `lim` (path model); limit (M,): the pointwise
-    speed limit at the grid's nodes (no motion is faster there); feed_breaks: the parameters
+    speed limit at the grid's nodes with a = j = 0 (it says where the motion rests); cap (M,):
+    the caps on the speed there (chord error, normal acceleration, feeds, axis velocities);
+    feed_breaks: the parameters
     where the programmed feed changes; None where it cannot plan (a
     stretch of no length between two rests, a law above MAX_LAW_PERIODS periods)."""
     rests, kinds = rest_nodes(grid, limit)
     if rests.size < 2 or not np.all(np.diff(grid.s_mm[rests]) > 0.0):
         return None
-    v_limit = np.where(np.isfinite(limit), limit, lim.feed_mm_s)
-    s_mm, u, rest = schedule_nodes(curve, grid, lim, rests, v_limit, feed_breaks)
+    s_mm, u, rest, v_estimate = schedule_nodes(curve, grid, lim, rests, cap,
+                                               curvature_threshold(lim), feed_breaks)
     if int(rest.sum()) != rests.size:
         return None
-    layout = build_layout(curve, grid, lim, s_mm, u, rest, feed_at_u)
+    layout = build_layout(curve, grid, lim, s_mm, u, rest, v_estimate, feed_at_u)
     schedule = plan_schedule(layout, lim)
     if not schedule.cycle_s * schedule.slowdown * extra_slowdown < MAX_LAW_PERIODS * lim.period_s:
         return None

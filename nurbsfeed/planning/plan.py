@@ -54,9 +54,8 @@ class Plan:
     # model, a share of the lowest limit they add to under the path model
     scurve_acc_mm_s2: float
     scurve_jerk_mm_s3: float
-    # "scurve": the paper's key points and S-curves; "envelope" / "optimal": planning.envelope's
-    # or planning.optimal's schedule, whose keys are the rests alone (the fields above describe
-    # the S-curve plan it started from)
+    # "scurve": the paper's key points and S-curves; "optimal": planning.path_plan's schedule,
+    # whose keys are the rests alone (the key and segment fields above are zeros there)
     planner: str = "scurve"
 
     @cached_property

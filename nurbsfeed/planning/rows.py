@@ -37,6 +37,7 @@ from nurbsfeed.jit import jit
 from nurbsfeed.planning.cells import G_CAP, G_D, G_K, G_KAPPA, G_KS, G_T, point_weights
 
 NORMAL_SIDES = 16  # the polygon inscribed in the circle |jerk across T| <= J_n (3-D)
+PLANAR_REL = 1e-9  # K_s's part along B below this share of |K_s + kappa^2 T|: none
 # at most: the cap, 2 tangential accelerations, 6 axis accelerations, 2 tangential jerks, 6
 # axis jerks, the normal jerk's polygon (or its 2 rows where the curve is planar)
 ROWS_PER_POINT = 1 + 2 + 6 + 2 + 6 + NORMAL_SIDES
@@ -62,7 +63,11 @@ def _normal_axes(g):
             nx, ny, nz = 0.0, 0.0, 0.0
     kn = ksx * nx + ksy * ny + ksz * nz
     bx, by, bz = ksx - kn * nx, ksy - kn * ny, ksz - kn * nz
-    return nx, ny, nz, kn, math.sqrt(bx * bx + by * by + bz * bz)
+    kb = math.sqrt(bx * bx + by * by + bz * bz)
+    # a planar curve's binormal part is rounding noise: its two rows along N are exact
+    if kb <= PLANAR_REL * math.sqrt(ksx * ksx + ksy * ksy + ksz * ksz):
+        kb = 0.0
+    return nx, ny, nz, kn, kb
 
 
 @jit

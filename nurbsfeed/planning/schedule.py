@@ -30,7 +30,7 @@ from nurbsfeed.planning.limits import Limits
 from nurbsfeed.planning.rows import ROWS_PER_POINT, all_rows, cell_ratios
 
 MAX_PROGRAMS = 8
-CONVERGED_REL = 1e-3  # a program shortening the cycle by less than this share: the last
+CONVERGED_REL = 3e-3  # a program shortening the cycle by less than this share: the last
 KEEP_SHARE = 0.5  # a row whose left side is at least this share of its bound joins a program
 CUT_ROUNDS = 8
 DEBUG = []
@@ -38,6 +38,7 @@ DUMP = None
 HIST = np.full((100, 5), np.nan)
 BROKEN_REL = 1e-7  # a row broken by more than this share of its terms is cut in
 CUT_REACH = 3  # ... with the rows of this many coefficients on either side
+SCALE_FLOOR = 1e-9  # of the largest cap: the least scale a variable takes
 GAUSS_X, GAUSS_W = np.polynomial.legendre.leggauss(8)
 
 
@@ -155,6 +156,10 @@ def plan_schedule(layout: Layout, lim: Limits, start: np.ndarray | None = None) 
     cells, geo = layout.cells, layout.geo
     n = layout.n_coefficients
     q_n = cells.shape[0]
+    # each variable's size, for the solver's scaling: the speed estimate's b (no schedule is
+    # faster), floored where it reaches 0 beside a rest
+    scale = np.maximum(np.minimum(layout.b_estimate, layout.cap),
+                       SCALE_FLOOR * float(layout.cap.max(initial=1.0)))
     if start is None:
         sb = np.empty((q_n, 3))
         static_b(geo, lim.jerk_mm_s3, lim.normal_jerk_mm_s3, acc_x, jerk_x, sb)
@@ -162,7 +167,7 @@ def plan_schedule(layout: Layout, lim: Limits, start: np.ndarray | None = None) 
         i0 = cells[:, 0].astype(np.int64)
         for j in range(3):
             np.minimum.at(start, i0 + j, sb.min(axis=1))
-        start = np.minimum(start, layout.cap)
+        start = np.minimum(start, layout.b_estimate)
         _join_rests(layout, start)
     # the box: the caps, with each end folded onto the coefficient beside it
     upper = layout.cap.copy()
@@ -204,7 +209,8 @@ def plan_schedule(layout: Layout, lim: Limits, start: np.ndarray | None = None) 
             sel = np.flatnonzero(keep)
             if DUMP is not None:
                 DUMP.append((n, ri[sel].copy(), rv[sel].copy(), rr[sel].copy(), objective.copy(), upper.copy(), x_lin.copy()))
-            x, status = solve_lp(n, ri[sel], rv[sel], rr[sel], objective, upper, x_lin, hist)
+            x, status = solve_lp(n, ri[sel], rv[sel], rr[sel], objective, upper, scale, x_lin,
+                                 hist)
             if status != 0:
                 break
             terms = rv * x[ri[:, None] + np.arange(3)]

@@ -18,29 +18,34 @@ import math
 import numpy as np
 
 from nurbsfeed.jit import jit
-from nurbsfeed.planning.cells import point_weights
 from nurbsfeed.planning.schedule import Schedule, cell_times
 from nurbsfeed.planning.timelaw import TimeLaw
 
 NEWTON_STEPS = 30
-GAUSS_X, GAUSS_W = np.polynomial.legendre.leggauss(6)
+GAUSS_X, GAUSS_W = np.polynomial.legendre.leggauss(4)
 
 
 @jit
-def _cell_time_to(c, cells, q, x):
-    """The time from inner cell q's start to share x of it, and b there (Gauss-Legendre)."""
-    w = np.empty((3, 3))
+def _b_at(c, cells, q, x):
+    """b at share x of inner cell q."""
     i0 = int(cells[q, 0])
-    h = cells[q, 4]
+    g0, g1, w0, h = cells[q, 1], cells[q, 2], cells[q, 3], cells[q, 4]
+    xs = x * h
+    s0 = (c[i0 + 1] - c[i0]) / g0
+    dd = ((c[i0 + 2] - c[i0 + 1]) / g1 - s0) / h
+    return max(w0 * c[i0] + (1.0 - w0) * c[i0 + 1] + s0 * xs + 0.5 * dd * xs * xs, 0.0)
+
+
+@jit
+def _time_between(c, cells, q, x0, x1):
+    """The time from share x0 to share x1 of inner cell q (Gauss-Legendre: b is a smooth
+    positive quadratic there)."""
+    half = 0.5 * (x1 - x0)
+    mid = 0.5 * (x1 + x0)
     t = 0.0
     for g in range(GAUSS_X.size):
-        xg = 0.5 * x * (GAUSS_X[g] + 1.0)
-        point_weights(cells[q, 1], cells[q, 2], cells[q, 3], h, xg, w)
-        b = w[0, 0] * c[i0] + w[0, 1] * c[i0 + 1] + w[0, 2] * c[i0 + 2]
-        t += GAUSS_W[g] / math.sqrt(max(b, 1e-300))
-    point_weights(cells[q, 1], cells[q, 2], cells[q, 3], h, x, w)
-    b = w[0, 0] * c[i0] + w[0, 1] * c[i0 + 1] + w[0, 2] * c[i0 + 2]
-    return 0.5 * x * h * t, max(b, 0.0)
+        t += GAUSS_W[g] / math.sqrt(max(_b_at(c, cells, q, mid + half * GAUSS_X[g]), 1e-300))
+    return half * cells[q, 4] * t
 
 
 @jit
@@ -49,24 +54,23 @@ def _sample_stretch(c, cells, cell_node, q_first, q_last, s_nodes, node0, node1,
     """s and v (n + 1,) at the n + 1 period instants of one stretch, its time stretched by
     scale (schedule time = law time / scale). Cells q_first..q_last (inner), the rest cells'
     durations rest_t (2,), lengths rest_h (2,), far values b_far (2,); s_nodes: the nodes' arc,
-    cell_node: each cell's first node, node0 and node1: the stretch's rests."""
+    cell_node: each cell's first node, node0 and node1: the stretch's rests. Within a cell each
+    instant is found by Newton's method from the last one (the time between them by
+    Gauss-Legendre), so every instant costs a few evaluations of b."""
     total = rest_t[0] + rest_t[1]
     for q in range(q_first, q_last + 1):
         total += times[q]
     step = total / n
-    q = q_first
-    t_cell = rest_t[0]  # the schedule time at which cell q starts
-    x = 0.5
     s_start = s_nodes[node0]
     s_end = s_nodes[node1]
+    q = q_first
+    t_cell = rest_t[0]  # the schedule time at which cell q starts
+    x_last = 0.0  # the share of cell q and the time at it of the last instant found there
+    t_last = t_cell
     for k in range(n + 1):
         t = k * step
-        if k == 0:
-            out_s[k] = s_start
-            out_v[k] = 0.0
-            continue
-        if k == n:
-            out_s[k] = s_end
+        if k == 0 or k == n:
+            out_s[k] = s_start if k == 0 else s_end
             out_v[k] = 0.0
             continue
         if t <= rest_t[0]:  # the rest cell at the start: y = (t sqrt(b) / (3 h))^3
@@ -82,29 +86,31 @@ def _sample_stretch(c, cells, cell_node, q_first, q_last, s_nodes, node0, node1,
         while q < q_last and t >= t_cell + times[q]:
             t_cell += times[q]
             q += 1
-            x = 0.5
-        tau = min(max(t - t_cell, 0.0), times[q])
-        # Newton on the cell's time, bracketed
-        lo, hi = 0.0, 1.0
-        b = 0.0
+            x_last = 0.0
+            t_last = t_cell
+        h = cells[q, 4]
+        want = min(t, t_cell + times[q]) - t_last
+        b = _b_at(c, cells, q, x_last)
+        x = min(x_last + want * math.sqrt(b) / h, 1.0)
+        lo, hi = x_last, 1.0
         for _ in range(NEWTON_STEPS):
-            tx, b = _cell_time_to(c, cells, q, x)
-            f = tx - tau
+            f = _time_between(c, cells, q, x_last, x) - want
             if f > 0.0:
                 hi = x
             else:
                 lo = x
-            dx = -f * math.sqrt(max(b, 1e-300)) / cells[q, 4]
-            nx = x + dx
-            if not lo < nx < hi:
+            b = _b_at(c, cells, q, x)
+            nx = x - f * math.sqrt(max(b, 1e-300)) / h
+            if not lo <= nx <= hi:
                 nx = 0.5 * (lo + hi)
-            if abs(nx - x) <= 1e-15 or hi - lo <= 1e-15:
-                x = nx
-                break
+            done = abs(nx - x) <= 1e-13
             x = nx
-        _, b = _cell_time_to(c, cells, q, x)
-        out_s[k] = s_nodes[cell_node[q]] + x * cells[q, 4]
-        out_v[k] = math.sqrt(b) / scale
+            if done:
+                break
+        out_s[k] = s_nodes[cell_node[q]] + x * h
+        out_v[k] = math.sqrt(_b_at(c, cells, q, x)) / scale
+        t_last += _time_between(c, cells, q, x_last, x)
+        x_last = x
 
 
 def schedule_law(schedule: Schedule, period_s: float, extra_slowdown: float = 1.0
