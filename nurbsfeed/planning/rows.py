@@ -37,7 +37,10 @@ from nurbsfeed.jit import jit
 from nurbsfeed.planning.cells import G_CAP, G_D, G_K, G_KAPPA, G_KS, G_T, point_weights
 
 NORMAL_SIDES = 16  # the polygon inscribed in the circle |jerk across T| <= J_n (3-D)
-PLANAR_REL = 1e-9  # K_s's part along B below this share of |K_s + kappa^2 T|: none
+PLANAR_REL = 1e-9  # K_s's part along B below this share of |K_s|: none
+# an axis whose share of T, K and K_s is below this has no rows (a still axis: its components
+# are rounding noise, which compiled and plain-Python arithmetic round apart)
+ZERO_REL = 1e-12
 # at most: the cap, 2 tangential accelerations, 6 axis accelerations, 2 tangential jerks, 6
 # axis jerks, the normal jerk's polygon (or its 2 rows where the curve is planar)
 ROWS_PER_POINT = 1 + 2 + 6 + 2 + 6 + NORMAL_SIDES
@@ -64,8 +67,9 @@ def _normal_axes(g):
     kn = ksx * nx + ksy * ny + ksz * nz
     bx, by, bz = ksx - kn * nx, ksy - kn * ny, ksz - kn * nz
     kb = math.sqrt(bx * bx + by * by + bz * bz)
-    # a planar curve's binormal part is rounding noise: its two rows along N are exact
-    if kb <= PLANAR_REL * math.sqrt(ksx * ksx + ksy * ksy + ksz * ksz):
+    # a planar curve's binormal part is rounding noise (measured against all of K_s: on a
+    # circle K_s + kappa^2 T is itself noise): its two rows along N are exact
+    if kb <= PLANAR_REL * math.sqrt(g[G_KS] ** 2 + g[G_KS + 1] ** 2 + g[G_KS + 2] ** 2):
         kb = 0.0
     return nx, ny, nz, kn, kb
 
@@ -101,9 +105,11 @@ def cell_rows(c_lin, cells, geo, q, lim_t, acc_t, jerk_n, acc_x, jerk_x, period,
             rhs[r] = 2.0 * acc_t
             r += 1
         # per axis |b'/2 T_x + b K_x| <= A_x
+        k_size = abs(k)
+        ks_size = math.sqrt(g[G_KS] ** 2 + g[G_KS + 1] ** 2 + g[G_KS + 2] ** 2)
         for x in range(3):
             tx, kx = g[G_T + x], g[G_K + x]
-            if acc_x[x] == np.inf or (tx == 0.0 and kx == 0.0):
+            if acc_x[x] == np.inf or (abs(tx) <= ZERO_REL and abs(kx) <= ZERO_REL * k_size):
                 continue
             for sign in (1.0, -1.0):
                 for j in range(3):
@@ -121,7 +127,8 @@ def cell_rows(c_lin, cells, geo, q, lim_t, acc_t, jerk_n, acc_x, jerk_x, period,
             r += 1
         for x in range(3):
             tx, kx, ksx = g[G_T + x], g[G_K + x], g[G_KS + x]
-            if jerk_x[x] == np.inf or (tx == 0.0 and kx == 0.0 and ksx == 0.0):
+            if jerk_x[x] == np.inf or (abs(tx) <= ZERO_REL and abs(kx) <= ZERO_REL * k_size
+                                       and abs(ksx) <= ZERO_REL * ks_size):
                 continue
             slope = 0.5 * jerk_x[x] / (b0 * root) + abs(g[G_D + x]) / period
             for sign in (1.0, -1.0):
