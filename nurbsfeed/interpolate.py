@@ -746,9 +746,10 @@ def _within(sigma: float, bracket: list[float]) -> float:
 
 
 @dataclass(frozen=True)
-class _Landing:
+class Landing:
     """How one stretch landed: sigma, the bump and its depth, the kernel runs it took (a run
-    from the bump on in its share)."""
+    from the bump on in its share). Stepping the stretch once with these (`Stepping`'s
+    `landed`) gives the landed points again without the search."""
 
     sigma: float
     bump: _Bump | None
@@ -860,7 +861,15 @@ class _Stretch:
                             for i in range(3)))
         return (gap if u <= self.u_end else -gap) - sigma * self.last_ds
 
-    def land(self, sigma: float) -> _Landing:
+    def replay(self, landing: Landing) -> None:
+        """Step as `land` ended, with its sigma and bump depth, from the start: the same points
+        to the last bit (a run's state is u alone, and the bump lowers only the targets from
+        its first period on, so a run from the start and one from the bump agree). A longer
+        stretch steps in `points` anyway."""
+        if self.resident:
+            self.run(landing.sigma, landing.slowdown)
+
+    def land(self, sigma: float) -> Landing:
         """Land exactly on the end (see the module docstring): first with targets sigma * ds,
         then with a bump or another sigma.
 
@@ -882,7 +891,7 @@ class _Stretch:
             landed = self._land_bump(self.bump, sigma, r, self.past_end, tol)
             if landed is not None:
                 slowdown, bump_runs = landed
-                return _Landing(sigma, self.bump, slowdown, runs + bump_runs)
+                return Landing(sigma, self.bump, slowdown, runs + bump_runs)
             r = self.run(sigma)  # the bump could not land: back to the plain run
             runs += 1.0
         # d(residual)/d(sigma) ~ -total: Newton, then secant steps, never above 1 (that would
@@ -940,7 +949,7 @@ class _Stretch:
             # a bug, not bad input: the command line reports it as an internal error
             raise RuntimeError(f"the landing leaves point {n - 1} of a stretch on or past its "
                                f"end u = {self.u_end!r}")
-        return _Landing(sigma, None, 0.0, runs)
+        return Landing(sigma, None, 0.0, runs)
 
     def _land_bump(self, bump: _Bump, sigma: float, r_full: float, past_full: bool,
                    tol: float) -> tuple[float, float] | None:
@@ -974,7 +983,7 @@ class _Stretch:
             runs += share
         return e, runs
 
-    def points(self, landing: _Landing, end_u: float) -> Iterator[tuple[int, np.ndarray,
+    def points(self, landing: Landing, end_u: float) -> Iterator[tuple[int, np.ndarray,
                                                                         np.ndarray, np.ndarray]]:
         """The landed stretch's points 1 .. n, in chunks (first index, u (M,), points (M, 3),
         targets into them (M,)): the last run's points, the end point (at end_u) last. A
@@ -1006,15 +1015,29 @@ class _Stretch:
 
 class Stepping:
     """One curve's interpolation, produced chunk by chunk (`chunks`): memory is bounded by
-    CHUNK_PERIODS whatever the curve's duration. The landing figures (runs, the stretches' laws)
-    are complete once the chunks are exhausted."""
+    CHUNK_PERIODS whatever the curve's duration. The landing figures (runs, the stretches' laws,
+    `landed`) are complete once the chunks are exhausted.
 
-    def __init__(self, plan: Plan, method: str = "rk2c") -> None:
+    `landings`: how the stretches landed when this plan was stepped with this method before
+    (a Stepping's `landed`): each stretch is stepped once with its landing instead of searching
+    for it again, the same points to the last bit (`_Stretch.replay`), and `runs` counts the
+    runs the search took then."""
+
+    def __init__(self, plan: Plan, method: str = "rk2c",
+                 landings: tuple[Landing, ...] | None = None) -> None:
         self.plan = plan
         self.method = method
+        self.given = landings
         self.runs = 0.0
         self.stretches: list[_StretchLaw] = []
+        self.landings: list[Landing] = []
+        self.done = False  # the chunks are exhausted
         self.start_jerk_mm_s3 = 0.0
+
+    @property
+    def landed(self) -> tuple[Landing, ...] | None:
+        """How every stretch landed, in order, once the chunks are exhausted (None before)."""
+        return tuple(self.landings) if self.done else None
 
     def chunks(self) -> Iterator[PointChunk]:
         """The curve's points in order: its first point alone, then every stretch between rests
@@ -1033,10 +1056,15 @@ class Stepping:
         k0 = 0  # index of the stretch's first point
         for i, p in enumerate(moving):
             stretch = _Stretch(plan, p, code, slow, CHUNK_PERIODS)
-            sigma = 1.0
-            if code == METHODS["rk2c"] and stretch.total > 0.0:
-                sigma = min(1.0, 1.0 - stretch.drift / stretch.total + LANDING_MARGIN_REL)
-            landing = stretch.land(sigma)
+            if self.given is not None:
+                landing = self.given[i]
+                stretch.replay(landing)
+            else:
+                sigma = 1.0
+                if code == METHODS["rk2c"] and stretch.total > 0.0:
+                    sigma = min(1.0, 1.0 - stretch.drift / stretch.total + LANDING_MARGIN_REL)
+                landing = stretch.land(sigma)
+            self.landings.append(landing)
             self.runs += landing.runs
             st = _StretchLaw(k0, stretch.n, law, stretch.t_a, stretch.t_b,
                              float(plan.piece_scale[p]), landing.sigma, landing.bump,
@@ -1054,6 +1082,7 @@ class Stepping:
         if not moving:
             self.start_jerk_mm_s3 = first_j / first_scale**3
             yield self._first_point(start_u)
+        self.done = True
 
     def _first_point(self, u: float) -> PointChunk:
         return PointChunk(0, np.array([u]), np.array(self.plan.curve.points[:1], dtype=float),

@@ -22,9 +22,11 @@ from __future__ import annotations
 
 import gc
 import os
+import sys
 import threading
 import time
 from collections.abc import Callable
+from types import ModuleType
 from typing import Any, TypeVar
 
 F = TypeVar("F", bound=Callable[..., object])
@@ -38,10 +40,34 @@ def _numba_njit() -> Callable[[F], F] | None:
     if os.environ.get("NURBSFEED_NO_JIT", "") == "1":
         return None
     try:
-        import numba
+        numba = _import_numba()
     except ImportError:
         return None
-    return numba.njit(cache=True, nogil=True)  # type: ignore[return-value]
+    return numba.njit(cache=True, nogil=True)
+
+
+def _import_numba() -> ModuleType:
+    """numba, imported with scipy hidden from it. Where scipy is installed (the test and optimal
+    extras install it) numba imports it on its own twice: to check its version, and in
+    numba.np.arraymath (imported when the first kernel loads) to probe for BLAS, which imports
+    scipy.linalg; 0.27 s of the 0.6 s a small conversion takes. The probe decides one thing,
+    whether compiled np.correlate and np.convolve call BLAS or a loop of their own, and no
+    kernel here uses either; np.dot and np.linalg look for scipy themselves when they compile.
+    So both imports happen while sys.modules holds None for scipy, which makes `import scipy`
+    raise ImportError (the import system's rule for a None entry), and the entry goes again
+    after them: scipy imports as usual for whoever needs it later (planner: optimal,
+    plan --reference). If scipy is already imported there is nothing to save."""
+    if "scipy" in sys.modules:
+        import numba
+
+        return numba
+    sys.modules["scipy"] = None  # type: ignore[assignment]
+    try:
+        import numba
+        import numba.np.arraymath  # noqa: F401  (the BLAS probe, see above)
+    finally:
+        del sys.modules["scipy"]
+    return numba
 
 
 def _hold_gc_while_compiling() -> Any:

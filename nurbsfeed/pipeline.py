@@ -37,7 +37,7 @@ from nurbsfeed.gcode.writer import (
     rapid_line,
 )
 from nurbsfeed.geometry import NurbsCurve
-from nurbsfeed.interpolate import PointChunk, Stepping
+from nurbsfeed.interpolate import Landing, PointChunk, Stepping
 from nurbsfeed.machine import FLOOR_MARGIN, Machine
 from nurbsfeed.planning.chain import Chain, Joints, chain_feed, joint_feed, joints, merge_curves
 from nurbsfeed.planning.limits import Limits
@@ -93,14 +93,24 @@ POSITION_SPEED_REL = 0.5 * GUARD_FEED_REL
 POSITION_ROUNDS = 2
 
 
+# A plan, and how its stretches landed when `verified_plan` stepped it (None: it did not, as
+# under the paper model): `Stepping` given them steps the same points without the search.
+Checked = tuple[Plan, tuple[Landing, ...] | None]
+
+
 def plan_block(block: CurveBlock, machine: Machine, method: str = "rk2c") -> Plan:
     """Plan one curve, given in mm (`CurveBlock.in_mm`), under the machine's limits
     (`verified_plan`); a curve the planner refuses (e.g. longer than max_curve_time_s) is
     refused at the block."""
+    return _checked_block(block, machine, method)[0]
+
+
+def _checked_block(block: CurveBlock, machine: Machine, method: str) -> Checked:
+    """`plan_block`, with the landings of `_checked_plan`."""
     if not block.lengths_in_mm:
         raise ValueError("plan_block takes a block in mm: CurveBlock.in_mm()")
     try:
-        return verified_plan(block.curve, machine.limits, block.feed_u, block.feed_mm_s,
+        return _checked_plan(block.curve, machine.limits, block.feed_u, block.feed_mm_s,
                              machine.max_curve_time_s, method,
                              feed_cap_mm_s(machine.limits, block))
     except CurveError as exc:
@@ -110,6 +120,12 @@ def plan_block(block: CurveBlock, machine: Machine, method: str = "rk2c") -> Pla
 def verified_plan(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s: np.ndarray,
                   max_curve_time_s: float = math.inf, method: str = "rk2c",
                   feed_cap: float = math.inf) -> Plan:
+    """The plan of `_checked_plan`."""
+    return _checked_plan(curve, lim, feed_u, feed_mm_s, max_curve_time_s, method, feed_cap)[0]
+
+
+def _checked_plan(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s: np.ndarray,
+                  max_curve_time_s: float, method: str, feed_cap: float) -> Checked:
     """`planner.plan_curve`, and under the path model a look at the plan's points (design §2e):
     stepped by `method`, they are read as positions one period apart
     (`safety.slowdown_from_points`, feed_cap the highest feed on the curve); where the path's
@@ -120,11 +136,12 @@ def verified_plan(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s:
     0.1 mm/s feed stepped to 0.100101 mm/s would be refused as a valid program).
     A path plan still above then gives way to the S-curve plan, read the same way: the one
     bounded fallback. A plan still above after all that goes on to the motion guard, which
-    refuses it (exit 2, located, nothing written)."""
+    refuses it (exit 2, located, nothing written). The plan comes with how its stretches
+    landed when its points were read (`Checked`): the conversion steps it again with them."""
     planners = [lim.planner] + (["scurve"] if lim.planner == "optimal" else [])
     plan = plan_curve(curve, lim, feed_u, feed_mm_s, max_curve_time_s)
     if lim.jerk_model != "path":  # the paper model's jerk limits are the law's and a proxy
-        return plan
+        return plan, None
     caps = dataclasses.replace(plan.limits, feed_mm_s=min(feed_cap, plan.limits.feed_mm_s))
     for planner in planners:
         planned = dataclasses.replace(lim, planner=planner)
@@ -132,17 +149,19 @@ def verified_plan(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s:
             plan = plan_curve(curve, planned, feed_u, feed_mm_s, max_curve_time_s)
         slowdown = 1.0
         for round_ in range(POSITION_ROUNDS + 1):
+            stepping = Stepping(plan, method)
             speed, asks = slowdown_from_points(caps, (chunk.points
-                                                      for chunk in Stepping(plan, method).chunks()))
+                                                      for chunk in stepping.chunks()))
+            landed = stepping.landed
             asks = max(speed if speed > 1.0 + POSITION_SPEED_REL else 1.0,
                        asks if asks > 1.0 + POSITION_REL else 1.0)
             if asks <= 1.0:
-                return plan
+                return plan, landed
             if round_ == POSITION_ROUNDS:
                 break
             slowdown *= asks * (1.0 + POSITION_REL)
             plan = plan_curve(curve, planned, feed_u, feed_mm_s, max_curve_time_s, slowdown)
-    return plan
+    return plan, landed  # the plan last stepped
 
 
 def rest_move_periods(machine: Machine) -> int:
@@ -395,7 +414,7 @@ def convert_window(window: ChainWindow, index: int, out: BinaryIO, machine: Mach
     label = (f'curve {index} "{block.curve.name}"' if n_curves == 1
              else f'curves {index}-{last_index} (a chain) "{block.curve.name}"')
     try:
-        plan = plan_block(block, machine, method)
+        plan, landings = _checked_block(block, machine, method)
     except CurveError as exc:
         raise CurveError(f"{label}: {exc.message}", exc.location) from None
     n_points = 1 + plan.n_periods
@@ -434,7 +453,7 @@ def convert_window(window: ChainWindow, index: int, out: BinaryIO, machine: Mach
     # written up to it
     last_k: list[int] = []
     joint_u = chain.joint_u
-    for chunk in Stepping(plan, method).chunks():
+    for chunk in Stepping(plan, method, landings).chunks():
         try:
             guard.check(chunk.points)
         except CurveError as exc:

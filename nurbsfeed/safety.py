@@ -30,6 +30,7 @@ from collections.abc import Iterable
 import numpy as np
 
 from nurbsfeed.errors import CurveError
+from nurbsfeed.jit import jit
 from nurbsfeed.planning.limits import Limits
 from nurbsfeed.program import CurveBlock
 
@@ -37,6 +38,86 @@ GUARD_FEED_REL = 1e-3  # a wild move is far above; a stepping error of 1e-4 is n
 GUARD_ACC_REL = 0.05
 GUARD_JERK_REL = 0.05
 GUARD_ABS_MM = 1e-9
+# `_difference_maxima`'s (13,) result: whether every point is finite (1 or 0); then for k = 1,
+# 2, 3 the largest norm of a k-th difference (k = 2: P_k+1 - 2 P_k + P_k-1, as the guard takes
+# it; k = 1, 3: as np.diff takes them) and the largest absolute k-th difference of each axis
+# (np.diff's), X, Y, Z
+_FINITE, _STEP, _D1, _TURN, _D2, _JERK, _D3 = 0, 1, 2, 5, 6, 9, 10
+_MAXIMA = 13
+
+
+@jit
+def _difference_maxima(points, out):
+    """The largest differences of points (N, 3), one pass, into out (_MAXIMA,) (0 where there
+    is no difference of that order). Each is the number numpy's reading of the same points gives
+    (`_first_wild`, `MotionGuard._check_path`, `slowdown_from_points`), operation for operation:
+    the differences subtracted as np.diff does, a norm summed x, y then z, and NaN where any
+    value it is the largest of is NaN, as np.max has it. The maximum of correctly rounded
+    quotients is the quotient of the maximum, so the ratios to a limit follow exactly."""
+    values = np.empty(_MAXIMA)  # this point's differences, in out's order
+    nan = np.zeros(_MAXIMA, dtype=np.bool_)
+    out[:] = 0.0
+    finite = True
+    d1x = d1y = d1z = d2x = d2y = d2z = 0.0  # the last first and second differences
+    for i in range(points.shape[0]):
+        px = points[i, 0]
+        py = points[i, 1]
+        pz = points[i, 2]
+        finite = finite and math.isfinite(px) and math.isfinite(py) and math.isfinite(pz)
+        if i == 0:
+            continue
+        ex = px - points[i - 1, 0]
+        ey = py - points[i - 1, 1]
+        ez = pz - points[i - 1, 2]
+        values[_STEP] = math.sqrt(ex * ex + ey * ey + ez * ez)
+        values[_D1] = abs(ex)
+        values[_D1 + 1] = abs(ey)
+        values[_D1 + 2] = abs(ez)
+        filled = _TURN
+        if i >= 2:
+            tx = (px - 2.0 * points[i - 1, 0]) + points[i - 2, 0]
+            ty = (py - 2.0 * points[i - 1, 1]) + points[i - 2, 1]
+            tz = (pz - 2.0 * points[i - 1, 2]) + points[i - 2, 2]
+            values[_TURN] = math.sqrt(tx * tx + ty * ty + tz * tz)
+            fx = ex - d1x
+            fy = ey - d1y
+            fz = ez - d1z
+            values[_D2] = abs(fx)
+            values[_D2 + 1] = abs(fy)
+            values[_D2 + 2] = abs(fz)
+            filled = _JERK
+            if i >= 3:
+                jx = fx - d2x
+                jy = fy - d2y
+                jz = fz - d2z
+                values[_JERK] = math.sqrt(jx * jx + jy * jy + jz * jz)
+                values[_D3] = abs(jx)
+                values[_D3 + 1] = abs(jy)
+                values[_D3 + 2] = abs(jz)
+                filled = _MAXIMA
+            d2x = fx
+            d2y = fy
+            d2z = fz
+        d1x = ex
+        d1y = ey
+        d1z = ez
+        for q in range(_STEP, filled):
+            v = values[q]
+            if v > out[q]:
+                out[q] = v
+            elif v != v:
+                nan[q] = True
+    for q in range(_STEP, _MAXIMA):
+        if nan[q]:
+            out[q] = math.nan
+    out[_FINITE] = 1.0 if finite else 0.0
+
+
+def difference_maxima(points: np.ndarray) -> np.ndarray:
+    """`_difference_maxima` of points (N, 3): (_MAXIMA,)."""
+    out = np.empty(_MAXIMA)
+    _difference_maxima(np.ascontiguousarray(points, dtype=float), out)
+    return out
 
 
 def _first_wild(points: np.ndarray, before: np.ndarray, max_step_mm: float,
@@ -75,7 +156,13 @@ def feed_cap_mm_s(lim: Limits, block: CurveBlock) -> float:
 
 
 class MotionGuard:
-    """Checks a curve's points chunk by chunk, in order, as they are handed to the writer."""
+    """Checks a curve's points chunk by chunk, in order, as they are handed to the writer.
+
+    Each chunk is read once in compiled code (`_difference_maxima`, with the last three points
+    before it): where every largest difference is within its bound, so is every difference.
+    Otherwise the chunk is read again in numpy (`_first_wild`, `_check_path`), which finds the
+    first point at fault and says what it would do; both readings compute the same numbers, so
+    the second always refuses (should it not, the curve is refused all the same)."""
 
     def __init__(self, lim: Limits, curve_label: str) -> None:
         period = lim.period_s
@@ -86,7 +173,7 @@ class MotionGuard:
         self.feed_mm_s = lim.feed_mm_s
         self.acc_mm_s2 = acc
         self.label = curve_label
-        self.before = np.full((2, 3), np.nan)
+        self.tail = np.empty((0, 3))  # the last three points seen (fewer at the start)
         self.seen = 0
         # jerk model `path`: bounds on the k-th differences (k = 1, 2, 3), per axis and (k = 3)
         # on the vector; the last three points seen
@@ -99,12 +186,41 @@ class MotionGuard:
                                 for k, limits in enumerate(self.axis_limits, start=1)]
             self.jerk_mm_s3 = math.hypot(lim.jerk_mm_s3, lim.normal_jerk_mm_s3)
             self.max_jerk_mm = self.jerk_mm_s3 * period**3 * margin[2] + 8.0 * GUARD_ABS_MM
-            self.tail = np.empty((0, 3))
 
     def check(self, points: np.ndarray) -> None:
         """points (N, 3): the next points of the curve, one period apart."""
         points = np.ascontiguousarray(points, dtype=float)
-        k, what, size = _first_wild(points, self.before, self.max_step_mm, self.max_turn_mm)
+        joined = np.concatenate([self.tail, points])
+        if not self._within(difference_maxima(joined)):
+            self._refuse(points)
+        self.tail = joined[-3:].copy()
+        self.seen += points.shape[0]
+
+    def _within(self, maxima: np.ndarray) -> bool:
+        """Whether the largest differences (`_difference_maxima`) keep every bound."""
+        if not (maxima[_FINITE] == 1.0 and maxima[_STEP] <= self.max_step_mm
+                and maxima[_TURN] <= self.max_turn_mm):
+            return False
+        if not self.path:
+            return True
+        return bool(all(np.all(maxima[first:first + 3] <= bound)
+                        for first, bound in zip((_D1, _D2, _D3), self.axis_bounds))
+                    and maxima[_JERK] <= self.max_jerk_mm)
+
+    def _refuse(self, points: np.ndarray) -> None:
+        """Raise the CurveError for the first point of `points` (after the tail) at fault."""
+        self._numpy_reading(points)
+        raise CurveError(f"{self.label}: refused, a difference of its points is above its bound "
+                         f"in compiled code and within it in numpy (point {self.seen} on); "
+                         "nothing was written (a safety check: please report this curve)")
+
+    def _numpy_reading(self, points: np.ndarray) -> None:
+        """Every bound on points (N, 3), after the tail, in numpy: the CurveError for the first
+        point at fault, if any."""
+        before = np.full((2, 3), np.nan)
+        last = self.tail[-2:]
+        before[2 - last.shape[0]:] = last
+        k, what, size = _first_wild(points, before, self.max_step_mm, self.max_turn_mm)
         if k >= 0:
             at = self.seen + k
             if what == 1:
@@ -119,18 +235,11 @@ class MotionGuard:
                              f"written (a safety check: please report this curve)")
         if self.path:
             self._check_path(points)
-        n = points.shape[0]
-        if n >= 2:
-            self.before = points[-2:].copy()
-        elif n == 1:
-            self.before = np.stack([self.before[1], points[0]])
-        self.seen += n
 
     def _check_path(self, points: np.ndarray) -> None:
         """The jerk model's own bounds on points (N, 3), after the last three points seen."""
         held = self.tail.shape[0]
         joined = np.concatenate([self.tail, points])
-        self.tail = joined[-3:].copy()
         period = self.period_s
         worst: tuple[int, str] | None = None
         diff = joined
@@ -176,18 +285,16 @@ def slowdown_from_points(lim: Limits, chunks: Iterable[np.ndarray]) -> tuple[flo
     for points in chunks:
         joined = np.concatenate([tail, points])
         tail = joined[-3:]
-        diff = joined
+        maxima = difference_maxima(joined)
         for k, per_axis in enumerate(limits, start=1):
-            diff = np.diff(diff, axis=0)
-            if diff.shape[0] == 0:
+            if joined.shape[0] <= k:  # no difference of this order yet
                 break
-            ratio = float(np.max(np.abs(diff) / (per_axis * period**k)))
+            first = (_D1, _D2, _D3)[k - 1]
+            ratio = float(np.max(maxima[first:first + 3] / (per_axis * period**k)))
             if k == 1:
-                step = float(np.max(np.linalg.norm(diff, axis=1)))
-                speed = max(speed, ratio, step / (lim.feed_mm_s * period))
+                speed = max(speed, ratio, float(maxima[_STEP]) / (lim.feed_mm_s * period))
                 continue
             if k == 3:
-                ratio = max(ratio, float(np.max(np.linalg.norm(diff, axis=1)))
-                            / (jerk * period**3))
+                ratio = max(ratio, float(maxima[_JERK]) / (jerk * period**3))
             worst = max(worst, ratio ** (1.0 / k))
     return speed, worst

@@ -14,7 +14,13 @@ from nurbsfeed.interpolate import interpolate
 from nurbsfeed.machine import machine_from_mapping
 from nurbsfeed.pipeline import plan_block
 from nurbsfeed.planning.planner import plan_curve
-from nurbsfeed.safety import GUARD_ACC_REL, GUARD_FEED_REL, GUARD_JERK_REL, MotionGuard
+from nurbsfeed.safety import (
+    GUARD_ACC_REL,
+    GUARD_FEED_REL,
+    GUARD_JERK_REL,
+    MotionGuard,
+    difference_maxima,
+)
 from tests.conftest import default_paper_limits
 
 PAPER = default_paper_limits()  # no per-axis limits: the guard holds the path's alone
@@ -145,3 +151,72 @@ def test_path_plans_of_the_samples_pass_the_path_guard(name: str) -> None:
     machine = machine_from_mapping(PATH_PROFILE, "test")
     for block in curve_blocks(SAMPLES / name):
         MotionGuard(machine.limits, "c").check(interpolate(plan_block(block, machine)).points)
+
+
+def numpy_maxima(points: np.ndarray) -> np.ndarray:
+    """The largest differences of points (N, 3) as numpy takes them (the readings
+    `_difference_maxima` stands for): (13,), in its order."""
+    out = np.zeros(13)
+    out[0] = float(np.isfinite(points).all())
+    diff = points
+    for k, first in ((1, 1), (2, 5), (3, 9)):
+        diff = np.diff(diff, axis=0)
+        if diff.shape[0] == 0:
+            break
+        if k == 2:
+            turn = points[2:] - 2.0 * points[1:-1] + points[:-2]
+            norm = np.sqrt(turn[:, 0] ** 2 + turn[:, 1] ** 2 + turn[:, 2] ** 2)
+        else:
+            norm = np.linalg.norm(diff, axis=1)
+        out[first] = np.max(norm)
+        out[first + 1:first + 4] = np.max(np.abs(diff), axis=0)
+    return out
+
+
+def random_points(rng: np.random.Generator, n: int) -> np.ndarray:
+    """A smooth run of n points one period apart, at any offset and scale."""
+    t = np.arange(n)[:, None] * 1e-3
+    return (rng.uniform(-500, 500, 3) + rng.uniform(-200, 200, 3) * t
+            + rng.uniform(-2000, 2000, 3) * t**2 + rng.uniform(-5e4, 5e4, 3) * t**3)
+
+
+def test_the_compiled_differences_are_numpys_to_the_last_bit() -> None:
+    rng = np.random.default_rng(7)
+    for n in [0, 1, 2, 3, 4, 5, *rng.integers(6, 3000, 40).tolist()]:
+        points = random_points(rng, n)
+        if n > 3 and rng.random() < 0.3:
+            points[rng.integers(n)] += rng.normal(0, 1e-3, 3)  # a kink
+        assert np.array_equal(difference_maxima(points), numpy_maxima(points)), n
+    for bad in (np.nan, np.inf, -np.inf):
+        points = random_points(rng, 9)
+        points[4, 1] = bad
+        assert np.array_equal(difference_maxima(points), numpy_maxima(points), equal_nan=True)
+
+
+@pytest.mark.parametrize("lim", [PAPER, PATH], ids=["paper", "path"])
+def test_the_guard_refuses_what_its_numpy_reading_refuses(lim) -> None:
+    """Random runs with a step of random size somewhere, checked in random chunks: the guard
+    refuses at the point, and with the message, that the numpy reading of the whole run at once
+    finds, and passes what it passes."""
+    rng = np.random.default_rng(11)
+    step_mm = lim.feed_mm_s * lim.period_s
+    outcomes = set()
+    for _ in range(300):
+        n = int(rng.integers(4, 400))
+        points = np.arange(n)[:, None] * step_mm * 0.5 * np.array([0.6, 0.8, 0.0])
+        points[int(rng.integers(1, n)):] += rng.normal(0, 10.0 ** rng.uniform(-10, -2), 3)
+        expected = None
+        try:
+            MotionGuard(lim, "c")._numpy_reading(points)
+        except CurveError as exc:
+            expected = exc.message
+        refused = None
+        guard = MotionGuard(lim, "c")
+        try:
+            for chunk in np.split(points, np.sort(rng.integers(0, n, 3))):
+                guard.check(chunk)
+        except CurveError as exc:
+            refused = exc.message
+        assert refused == expected
+        outcomes.add(expected is None)
+    assert outcomes == {True, False}  # both sides of the bounds were drawn

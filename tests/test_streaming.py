@@ -30,6 +30,7 @@ from tests.test_cli import run
 from tests.test_planning_interpolation import line
 
 SMALL_CHUNK = 97  # odd: chunk edges fall anywhere, bumps straddle them
+CHECKED_BLOCK = pipeline._checked_block  # the planning a measurement patches out
 
 
 def curve_json(name: str, degree: int, knots, points, feed_mm_min: float) -> dict:
@@ -107,6 +108,42 @@ def test_in_memory_interpolation_is_the_streamed_one(monkeypatch: pytest.MonkeyP
     assert np.array_equal(v, whole.v_mm_s)
 
 
+@pytest.mark.parametrize("chunk", [interpolate_module.CHUNK_PERIODS, SMALL_CHUNK])
+def test_stepping_with_the_landings_found_steps_the_same_points(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, chunk: int) -> None:
+    """A plan stepped again with the landings of a first stepping (as the conversion does with
+    those of `verified_plan`'s look at the points) gives the same chunks to the last bit,
+    through every kind of landing, in one chunk a stretch or many."""
+    monkeypatch.setattr(interpolate_module, "CHUNK_PERIODS", chunk)
+    machine = load_machine("paper-table1")
+    blocks = [item.in_mm() for item in json_items(many_period_program(tmp_path))
+              if isinstance(item, CurveBlock)]
+    for block in blocks:
+        plan = plan_block(block, machine)
+        first = Stepping(plan)
+        searched = list(first.chunks())
+        assert first.landed is not None
+        again = Stepping(plan, landings=first.landed)
+        replayed = list(again.chunks())
+        assert again.landed == first.landed and again.runs == first.runs
+        assert len(replayed) == len(searched)
+        for a, b in zip(searched, replayed):
+            assert a.k0 == b.k0 and a.local == b.local
+            assert np.array_equal(a.u, b.u) and np.array_equal(a.points, b.points)
+            assert np.array_equal(a.ds_mm, b.ds_mm)
+            assert all(np.array_equal(x, y) for x, y in zip(a.kinematics(), b.kinematics()))
+
+
+def test_a_stepping_not_exhausted_has_not_landed(paper_limits: Limits) -> None:
+    stepping = Stepping(plan_curve(line([[0, 0], [30, 5], [60, 0]], degree=2), paper_limits))
+    chunks = stepping.chunks()
+    next(chunks)
+    next(chunks)
+    assert stepping.landed is None
+    list(chunks)
+    assert stepping.landed is not None and len(stepping.landed) == len(stepping.stretches)
+
+
 class Discard(io.RawIOBase):
     """An output that keeps nothing: what is measured is the conversion's own memory."""
 
@@ -123,8 +160,8 @@ def peak_bytes(feed_mm_s: float, trace: bool, monkeypatch: pytest.MonkeyPatch) -
     machine = load_machine("paper-table1", {"max_feed_mm_s": feed_mm_s})
     block = next(item for item in json_items(SAMPLES / "quarter-circle.json")
                  if isinstance(item, CurveBlock))
-    plan = plan_block(block.in_mm(), machine)
-    monkeypatch.setattr(pipeline, "plan_block", lambda *_: plan)
+    checked = CHECKED_BLOCK(block.in_mm(), machine, "rk2c")
+    monkeypatch.setattr(pipeline, "_checked_block", lambda *_: checked)
     tracemalloc.start()
     try:
         result = convert_block(block, 0, Discard(), machine, "rk2c",

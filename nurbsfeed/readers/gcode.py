@@ -121,9 +121,10 @@ class _Reader:
         line = 0
         while True:
             if scan and isinstance(self.open, NurbsCurveReader):
-                n = self._take_run(ahead, line + 1)
+                n, more = self._take_run(ahead, line + 1)
                 if n:  # a run of plain control points, scanned at once
                     line += n
+                    scan = more
                     continue
                 scan = False
             line_text = ahead.next()
@@ -225,23 +226,26 @@ class _Reader:
             if word.letter == "G" and word.code in (200, 210):
                 self.g70 = word if word.text.rstrip(".") == "70" else None
 
-    def _take_run(self, ahead: _LookAhead, line: int) -> int:
+    def _take_run(self, ahead: _LookAhead, line: int) -> tuple[int, bool]:
         """`NurbsCurveReader.take_run` on the next lines (line number `line` on), at most
         point_lines.RUN_LINES of them and only as far as they are ASCII (where string and byte
-        positions agree; a point line is ASCII): the number of lines it read, now consumed."""
+        positions agree; a point line is ASCII): the number of lines it read, now consumed, and
+        whether it read every line given (else the next line is one the scan refuses, and would
+        refuse again: the run has ended)."""
         assert isinstance(self.open, NurbsCurveReader), "called inside a G06.2 / G6.2 curve"
         if not self.open.takes_runs:  # (before the text is joined: ~50 us a call)
-            return 0
+            return 0, False
         batch = ahead.peek(point_lines.RUN_LINES)
         text = "".join(batch)
         if not text.isascii():  # rare: find the first line that is not
             n_ascii = next(i for i, line_text in enumerate(batch) if not line_text.isascii())
             if not n_ascii:
-                return 0
-            text = "".join(batch[:n_ascii])
+                return 0, False
+            batch = batch[:n_ascii]
+            text = "".join(batch)
         n, _ = self.open.take_run(point_lines.ProgramCodes(text), 0, line)
         ahead.drop(n)
-        return n
+        return n, n == len(batch)
 
     def _spline_word(self, block: Block) -> Word | None:
         """The G5 / G5.1 word of a LinuxCNC spline block, or None (module docstring)."""
