@@ -148,7 +148,7 @@ def test_check_under_another_profile_exits_2_and_names_what_differs(butterfly_nc
     assert code == 2 and stdout == ""
     assert stderr.startswith(f"{butterfly_nc}:{record_line}:1: converted under the profile "
                              "paper-table1 (recorded here), but checked under default, which "
-                             "differs: jerk_model paper -> path; planner scurve -> envelope; "
+                             "differs: jerk_model paper -> path; planner scurve -> optimal; "
                              "max_feed_mm_s 100.0 -> 200.0; ")
     assert "max_vel_x_mm_s unset -> 250.0" in stderr and "\n" not in stderr.rstrip("\n")
     code, stdout, stderr = run("check", BUTTERFLY, str(butterfly_nc), "--max-feed-mm-s", "90")

@@ -81,7 +81,7 @@ def test_normal_limits_hold_at_every_interpolation_point(curve: NurbsCurve) -> N
 
 @pytest.mark.parametrize("curve", [BEFORE_END, BEFORE_KNOT], ids=["end", "knot"])
 def test_the_path_limits_hold_from_the_points_under_the_default(curve: NurbsCurve) -> None:
-    """Under the default profile itself (path model, envelope planner): the peak hidden in the
+    """Under the default profile itself (path model, optimal planner): the peak hidden in the
     last interval is passed within every path and per-axis limit, measured from the points."""
     lim = load_machine("default").limits
     assert_keeps_every_path_limit(interpolate(plan_curve(curve, lim)), lim, "peak")

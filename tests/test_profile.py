@@ -325,7 +325,7 @@ def test_the_linuxcnc_profile_holds_each_axis_to_the_simulated_mills_joint_limit
     ini = configparser.ConfigParser(strict=False, inline_comment_prefixes=("#",))
     ini.read(ROOT / "tests" / "linuxcnc" / "sim" / "sim.ini")
     limits = load_machine("linuxcnc").limits
-    assert (limits.jerk_model, limits.planner) == ("path", "envelope")
+    assert (limits.jerk_model, limits.planner) == ("path", "optimal")
     for x in range(3):
         joint = ini[f"JOINT_{x}"]
         assert limits.axis_vel_mm_s[x] == float(joint["MAX_VELOCITY"])
@@ -366,7 +366,7 @@ def test_a_profile_file_name_is_recorded_in_characters_a_comment_takes(tmp_path:
     path.write_text((ROOT / "configs" / "default.yaml").read_text())
     lines = record_lines(load_machine(str(path)))
     assert lines[0] == ("(nurbsfeed profile: name my__odd__mill.yaml, nurbsfeed 0.1.0, "
-                        "jerk_model path, planner envelope)")
+                        "jerk_model path, planner optimal)")
     long = tmp_path / ("x" * 200 + ".yaml")
     long.write_text(path.read_text())
     assert record_lines(load_machine(str(long)))[0] == f"(nurbsfeed profile: name {'x' * 60})"

@@ -49,6 +49,8 @@ G_SIZE = 14
 POINTS = (0.0, 0.5, 1.0)  # where a cell's limits are read: its start, middle and end
 
 CELL_PERIODS = 4.0  # a cell lasting longer at the speed estimate is cut
+RECUT_SLACK = 2.0  # ... and one the schedule spends over this many times as long in, again
+MAX_CUT = 64  # pieces a cell is cut into at most in one go
 # a grid node closer than this many periods at the speed estimate to the last one kept goes
 # (curvature maxima, knots, stops and the ends always stay): cells far shorter than a period
 # are finer than anything the machine's positions show, they make rows that ask b'' to
@@ -120,13 +122,13 @@ def _topp_passes(b, h, slope):
 
 def schedule_nodes(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.ndarray,
                    cap_mm_s: np.ndarray, kappa_floor: float,
-                   keep_u: np.ndarray = np.empty(0)
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                   keep_u: np.ndarray = np.empty(0), max_nodes: int = 2**62
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """The nodes (s_mm, u, rest) (M,) of the schedule from the grid's, resting at grid nodes
     rest_nodes (R,) (the ends first and last); cap_mm_s (N,): the speed caps at the grid's
     nodes; kappa_floor: the curvature below which the caps do not depend on it (kappa_0);
     keep_u: parameters whose nodes stay (where the programmed feed changes) (module docstring).
-    Also the speed estimate (M,) at the nodes (`speed_estimate`)."""
+    Also the speed estimate (M,) at the nodes (`speed_estimate`). None past max_nodes nodes."""
     s_mm, u = np.asarray(grid.s_mm, dtype=float), np.asarray(grid.u, dtype=float)
     rest = np.zeros(s_mm.size, dtype=bool)
     rest[rest_nodes] = True
@@ -179,6 +181,8 @@ def schedule_nodes(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.nd
     speed = np.maximum(np.minimum(v[:-1], v[1:]), 1e-300)
     parts = np.ceil(h / (CELL_PERIODS * lim.period_s * speed))
     long = (parts > 1.0) & ~rest[:-1] & ~rest[1:]
+    if s_mm.size + np.sum(parts[long] - 1.0) > max_nodes:
+        return None
     if long.any():
         cut = [s_mm[i] + h[i] * np.arange(1, n) / n
                for i, n in zip(np.flatnonzero(long), parts[long].astype(np.int64))]
@@ -186,6 +190,25 @@ def schedule_nodes(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.nd
     # the estimate again on the nodes (inserted ones took theirs by interpolation)
     cap = np.interp(s_mm, grid.s_mm, np.asarray(cap_mm_s, dtype=float))
     return s_mm, u, rest, speed_estimate(s_mm, cap, _moving_limits(curve, lim)[0], rest)
+
+
+def cut_cells(curve: NurbsCurve, grid: Grid, lim: Limits, layout: Layout, times: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """The nodes of `layout` with each inner cell whose schedule spends times[q] (Q,) over
+    CELL_PERIODS * RECUT_SLACK periods in it cut into pieces of CELL_PERIODS (the estimate
+    sized them without jerk, which slows the motion in tight turns far below it), and the
+    speed estimate then; None where none is that long."""
+    parts = np.ceil(times / (CELL_PERIODS * lim.period_s))
+    long = np.flatnonzero(times > CELL_PERIODS * RECUT_SLACK * lim.period_s)
+    if long.size == 0:
+        return None
+    s_mm, node = layout.s_mm, layout.cell_node
+    h = s_mm[node[long] + 1] - s_mm[node[long]]
+    cut = [s_mm[i] + hq * np.arange(1, n) / n
+           for i, hq, n in zip(node[long], h, np.minimum(parts[long], MAX_CUT).astype(np.int64))]
+    v = np.sqrt(np.interp(s_mm, layout.xi, layout.b_estimate))
+    s_mm, u, rest, v = _insert(curve, grid, s_mm, layout.u, layout.rest, v, cut)
+    return s_mm, u, rest, v
 
 
 def _insert(curve: NurbsCurve, grid: Grid, s_mm: np.ndarray, u: np.ndarray, rest: np.ndarray,

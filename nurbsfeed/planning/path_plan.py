@@ -13,17 +13,22 @@ from dataclasses import dataclass
 import numpy as np
 
 from nurbsfeed.geometry.nurbs import NurbsCurve
-from nurbsfeed.planning.cells import build_layout, schedule_nodes
+from nurbsfeed.planning.cells import build_layout, cut_cells, schedule_nodes
 from nurbsfeed.planning.grid import Grid
 from nurbsfeed.planning.limits import Limits, curvature_threshold
 from nurbsfeed.planning.plan import KIND_CORNER, KIND_CUSP, KIND_END
-from nurbsfeed.planning.schedule import plan_schedule
+from nurbsfeed.planning.schedule import cell_times, plan_schedule
 from nurbsfeed.planning.schedule_law import schedule_law
 from nurbsfeed.planning.timelaw import TimeLaw
 
 # past this many periods a curve keeps the S-curve plan, whose pieces do not grow with its
 # duration (the law holds a piece a period)
 MAX_LAW_PERIODS = 1_000_000
+# past this many cells too: the programs' rows take 4 kB a cell
+MAX_CELLS = 40_000
+# a schedule that dwells in cells far longer than the estimate sized them is planned again on
+# cells cut to size (cells.cut_cells), this many times at most
+RECUTS = 2
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,18 +65,27 @@ def plan_path(curve: NurbsCurve, grid: Grid, lim: Limits, limit: np.ndarray, cap
     """The schedule of `curve` on `grid` under `lim` (path model); limit (M,): the pointwise
     speed limit at the grid's nodes with a = j = 0 (it says where the motion rests); cap (M,):
     the caps on the speed there (chord error, normal acceleration, feeds, axis velocities);
-    feed_breaks: the parameters
-    where the programmed feed changes; None where it cannot plan (a
-    stretch of no length between two rests, a law above MAX_LAW_PERIODS periods)."""
+    feed_breaks: the parameters where the programmed feed changes; None where it cannot plan
+    (a stretch of no length between two rests, over MAX_CELLS cells, a law above
+    MAX_LAW_PERIODS periods)."""
     rests, kinds = rest_nodes(grid, limit)
     if rests.size < 2 or not np.all(np.diff(grid.s_mm[rests]) > 0.0):
         return None
-    s_mm, u, rest, v_estimate = schedule_nodes(curve, grid, lim, rests, cap,
-                                               curvature_threshold(lim), feed_breaks)
-    if int(rest.sum()) != rests.size:
+    nodes = schedule_nodes(curve, grid, lim, rests, cap, curvature_threshold(lim), feed_breaks,
+                           MAX_CELLS)
+    if nodes is None or int(nodes[2].sum()) != rests.size:
         return None
+    s_mm, u, rest, v_estimate = nodes
     layout = build_layout(curve, grid, lim, s_mm, u, rest, v_estimate, feed_at_u)
     schedule = plan_schedule(layout, lim)
+    for _ in range(RECUTS):
+        times = np.empty(layout.cells.shape[0] + 2 * layout.first.size)
+        cell_times(schedule.c, layout.cells, layout.first, layout.last, layout.rest_h, times)
+        nodes = cut_cells(curve, grid, lim, layout, times[:layout.cells.shape[0]])
+        if nodes is None or nodes[0].size > MAX_CELLS:
+            break
+        layout = build_layout(curve, grid, lim, *nodes, feed_at_u)
+        schedule = plan_schedule(layout, lim)
     if not schedule.cycle_s * schedule.slowdown * extra_slowdown < MAX_LAW_PERIODS * lim.period_s:
         return None
     law, _ = schedule_law(schedule, lim.period_s, extra_slowdown)
