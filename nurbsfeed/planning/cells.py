@@ -61,7 +61,7 @@ MIN_CELL_PERIODS = 1.0
 # below kappa_0, where it sets no limit, counts as kappa_0): in a valley the rows must see the
 # curvature change to plan its bottom
 MERGE_KAPPA_RATIO = 1.25
-MIN_CELL_REL = 1e-9  # of the curve's length: nodes closer than this are one
+MIN_CELL_REL = 1e-6  # of the curve's length: nodes closer than this are one
 MIN_STRETCH_CELLS = 4  # a stretch between rests has at least this many cells
 REST_CELL_SHARE = 0.05  # of A^3 / (6 J^2): the first cell beside a rest at most ...
 REST_CELLS_PER_STRETCH = 32  # ... and at most this share of half its stretch
@@ -315,13 +315,16 @@ def build_layout(curve: NurbsCurve, grid: Grid, lim: Limits, s_mm: np.ndarray, u
     cells_arr[:, 2] = xi_all[i0 + 2] - xi_all[i0 + 1]
     cells_arr[:, 3] = kw_all[i0]
     node = np.array(cell_node, dtype=np.int64)
-    # each cell's points: its start (on its own span), middle, end (one ulp below the next node:
-    # at a knot, the span before it)
+    # each cell's points: its start (on its own span), middle, end (at a knot one ulp below
+    # it, on the span before it; elsewhere the next cell's start itself, so that rows.all_rows
+    # sees the two are one point)
     u0 = u[node]
-    u1 = np.maximum(np.nextafter(u[node + 1], -np.inf), u0)
+    end_knot = _knot_index(curve, u[node + 1])
+    u1 = np.where(end_knot >= 0, np.maximum(np.nextafter(u[node + 1], -np.inf), u0),
+                  u[node + 1])
     um = arc_parameters(curve, grid, 0.5 * (s_mm[node] + s_mm[node + 1]))
     pts_u = np.concatenate([u0, um, u1])
-    at_knot = _knot_index(curve, np.concatenate([u0, np.full(um.size, np.nan), u[node + 1]]))
+    at_knot = np.concatenate([_knot_index(curve, u0), np.full(um.size, -1), end_knot])
     geo = point_geometry(curve, lim, pts_u, feed_at_u(pts_u), at_knot)
     q = node.size
     geo3 = np.ascontiguousarray(np.stack([geo[:q], geo[q:2 * q], geo[2 * q:]], axis=1))

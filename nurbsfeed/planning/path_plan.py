@@ -66,8 +66,8 @@ def plan_path(curve: NurbsCurve, grid: Grid, lim: Limits, limit: np.ndarray, cap
     speed limit at the grid's nodes with a = j = 0 (it says where the motion rests); cap (M,):
     the caps on the speed there (chord error, normal acceleration, feeds, axis velocities);
     feed_breaks: the parameters where the programmed feed changes; None where it cannot plan
-    (a stretch of no length between two rests, over MAX_CELLS cells, a law above
-    MAX_LAW_PERIODS periods)."""
+    (a stretch of no length between two rests, over MAX_CELLS cells, no program solved, a law
+    above MAX_LAW_PERIODS periods)."""
     rests, kinds = rest_nodes(grid, limit)
     if rests.size < 2 or not np.all(np.diff(grid.s_mm[rests]) > 0.0):
         return None
@@ -78,14 +78,19 @@ def plan_path(curve: NurbsCurve, grid: Grid, lim: Limits, limit: np.ndarray, cap
     s_mm, u, rest, v_estimate = nodes
     layout = build_layout(curve, grid, lim, s_mm, u, rest, v_estimate, feed_at_u)
     schedule = plan_schedule(layout, lim)
+    if not schedule.solved:
+        return None
     for _ in range(RECUTS):
         times = np.empty(layout.cells.shape[0] + 2 * layout.first.size)
         cell_times(schedule.c, layout.cells, layout.first, layout.last, layout.rest_h, times)
         nodes = cut_cells(curve, grid, lim, layout, times[:layout.cells.shape[0]])
         if nodes is None or nodes[0].size > MAX_CELLS:
             break
-        layout = build_layout(curve, grid, lim, *nodes, feed_at_u)
-        schedule = plan_schedule(layout, lim)
+        finer = build_layout(curve, grid, lim, *nodes, feed_at_u)
+        cut = plan_schedule(finer, lim)
+        if not cut.solved:
+            break
+        layout, schedule = finer, cut
     if not schedule.cycle_s * schedule.slowdown * extra_slowdown < MAX_LAW_PERIODS * lim.period_s:
         return None
     law, _ = schedule_law(schedule, lim.period_s, extra_slowdown)

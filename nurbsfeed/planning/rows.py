@@ -9,7 +9,8 @@ Along C(s), with K = kappa N and K_s = dK/ds = -kappa^2 T + kappa' N + kappa tau
 At each point of a cell (cells.POINTS) b, b' and b'' are linear in the cell's three
 coefficients (cells.point_weights), so every limit is a row over three consecutive variables:
 
-- b <= cap^2 (the chord error, the normal acceleration, the feed, each axis's velocity);
+- b <= cap^2 (the chord error, the normal acceleration, the feed, each axis's velocity), as
+  the box on the coefficients (cells.Layout.cap);
 - |b'| / 2 <= A_t, and per axis |b'/2 T_x + b K_x| <= A_x;
 - the jerks, sqrt(b) |L(b, b', b'')| <= J with L linear: along the path L = b''/2 - kappa^2 b
   (K_s . T = -kappa^2), per axis L = b''/2 T_x + 3/2 b' K_x + b K_s,x, across the path the
@@ -41,9 +42,9 @@ PLANAR_REL = 1e-9  # K_s's part along B below this share of |K_s|: none
 # an axis whose share of T, K and K_s is below this has no rows (a still axis: its components
 # are rounding noise, which compiled and plain-Python arithmetic round apart)
 ZERO_REL = 1e-12
-# at most: the cap, 2 tangential accelerations, 6 axis accelerations, 2 tangential jerks, 6
-# axis jerks, the normal jerk's polygon (or its 2 rows where the curve is planar)
-ROWS_PER_POINT = 1 + 2 + 6 + 2 + 6 + NORMAL_SIDES
+# at most: 2 tangential accelerations, 6 axis accelerations, 2 tangential jerks, 6 axis
+# jerks, the normal jerk's half polygon (or its 2 rows where the curve is planar)
+ROWS_PER_POINT = 2 + 6 + 2 + 6 + NORMAL_SIDES // 2 + 1
 # the largest b a linearization point takes, and the smallest: b0 of a row's sqrt(b)
 B_FLOOR = 1e-12
 
@@ -75,10 +76,22 @@ def _normal_axes(g):
 
 
 @jit
-def cell_rows(c_lin, cells, geo, q, lim_t, acc_t, jerk_n, acc_x, jerk_x, period, idx, val, rhs,
-              r):
+def _same_point(g, h):
+    """Whether two geometry rows are one point's (a cell's end and the next one's start away
+    from a knot, read at the same parameter)."""
+    for i in range(g.size):
+        if g[i] != h[i]:
+            return False
+    return True
+
+
+@jit
+def cell_rows(c_lin, cells, geo, q, shared_end, lim_t, acc_t, jerk_n, acc_x, jerk_x, period,
+              idx, val, rhs, r):
     """Write the rows of inner cell q, linearized at the coefficients c_lin, from row r on:
-    idx (first coefficient), val (3 weights), rhs. Returns the next free row."""
+    idx (first coefficient), val (3 weights), rhs. Returns the next free row. Where
+    shared_end, the cell's end is the next cell's start (C1: the same b and b' there), and
+    only its rows with b'' (the jerks along T and per axis) are its own."""
     w = np.empty((3, 3))
     i0 = int(cells[q, 0])
     g0, g1, w0, h = cells[q, 1], cells[q, 2], cells[q, 3], cells[q, 4]
@@ -91,14 +104,12 @@ def cell_rows(c_lin, cells, geo, q, lim_t, acc_t, jerk_n, acc_x, jerk_x, period,
         b0 = max(b0, B_FLOOR)
         root = math.sqrt(b0)
         k = g[G_KAPPA]
-        # b <= cap^2
-        for j in range(3):
-            val[r, j] = w[0, j]
-        idx[r] = i0
-        rhs[r] = g[G_CAP]
-        r += 1
+        own = not (p == 2 and shared_end)
+        # (b <= cap^2 is the box's: each coefficient is capped by its cells' lowest cap)
         # |b'| <= 2 A_t
         for sign in (1.0, -1.0):
+            if not own:
+                break
             for j in range(3):
                 val[r, j] = sign * w[1, j]
             idx[r] = i0
@@ -109,7 +120,8 @@ def cell_rows(c_lin, cells, geo, q, lim_t, acc_t, jerk_n, acc_x, jerk_x, period,
         ks_size = math.sqrt(g[G_KS] ** 2 + g[G_KS + 1] ** 2 + g[G_KS + 2] ** 2)
         for x in range(3):
             tx, kx = g[G_T + x], g[G_K + x]
-            if acc_x[x] == np.inf or (abs(tx) <= ZERO_REL and abs(kx) <= ZERO_REL * k_size):
+            if not own or acc_x[x] == np.inf or (abs(tx) <= ZERO_REL
+                                                 and abs(kx) <= ZERO_REL * k_size):
                 continue
             for sign in (1.0, -1.0):
                 for j in range(3):
@@ -138,18 +150,22 @@ def cell_rows(c_lin, cells, geo, q, lim_t, acc_t, jerk_n, acc_x, jerk_x, period,
                 idx[r] = i0
                 rhs[r] = 1.5 * jerk_x[x] / root
                 r += 1
+        if not own:
+            continue
         nx, ny, nz, kn, kb = _normal_axes(g)
         jump = math.sqrt(g[G_D] ** 2 + g[G_D + 1] ** 2 + g[G_D + 2] ** 2) / period
         slope = 0.5 * jerk_n / (b0 * root) + jump
-        sides = NORMAL_SIDES if kb > 0.0 else 2
-        # the inscribed polygon: its sides at cos(pi / sides) of the radius
-        shrink = math.cos(math.pi / sides) if sides > 2 else 1.0
+        # the inscribed polygon: its sides at cos(pi / NORMAL_SIDES) of the radius; the part
+        # along B is b kb >= 0, so only the sides facing it (angles 0 to pi) can bind: those
+        # facing away are implied by the two along N
+        shrink = math.cos(math.pi / NORMAL_SIDES) if kb > 0.0 else 1.0
+        sides = NORMAL_SIDES // 2 + 1 if kb > 0.0 else 2
         for side in range(sides):
-            if sides == 2:
-                cn, cb = (1.0, 0.0) if side == 0 else (-1.0, 0.0)
-            else:
-                theta = 2.0 * math.pi * side / sides
+            if kb > 0.0:
+                theta = 2.0 * math.pi * side / NORMAL_SIDES
                 cn, cb = math.cos(theta), math.sin(theta)
+            else:
+                cn, cb = (1.0, 0.0) if side == 0 else (-1.0, 0.0)
             for j in range(3):
                 val[r, j] = (cn * (1.5 * k * w[1, j] + kn * w[0, j]) + cb * kb * w[0, j]
                              + shrink * slope * w[0, j])
@@ -163,9 +179,12 @@ def cell_rows(c_lin, cells, geo, q, lim_t, acc_t, jerk_n, acc_x, jerk_x, period,
 def all_rows(c_lin, cells, geo, lim_t, acc_t, jerk_n, acc_x, jerk_x, period, idx, val, rhs):
     """Every inner cell's rows (`cell_rows`) into idx (R,), val (R, 3), rhs (R,); returns R."""
     r = 0
-    for q in range(cells.shape[0]):
-        r = cell_rows(c_lin, cells, geo, q, lim_t, acc_t, jerk_n, acc_x, jerk_x, period, idx,
-                      val, rhs, r)
+    q_n = cells.shape[0]
+    for q in range(q_n):
+        shared = (q + 1 < q_n and int(cells[q + 1, 0]) == int(cells[q, 0]) + 1
+                  and _same_point(geo[q, 2], geo[q + 1, 0]))
+        r = cell_rows(c_lin, cells, geo, q, shared, lim_t, acc_t, jerk_n, acc_x, jerk_x,
+                      period, idx, val, rhs, r)
     return r
 
 
