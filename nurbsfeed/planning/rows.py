@@ -21,7 +21,7 @@ coefficients (cells.point_weights), so every limit is a row over three consecuti
 
 J / sqrt(b) is convex in b, so its tangent at the linearization point b0 lies below it:
 J (3/2 - b / (2 b0)) / sqrt(b0) <= J / sqrt(b), and a row |L| <= that tangent keeps the true
-limit for every b (a convex-concave step). The rows are exact at b0; the linear programs
+limit for every b (a convex-concave step); a jump's -sqrt(b) |D| / T is convex too. The rows are exact at b0; the linear programs
 (planning.schedule) move b0 to their solution and solve again.
 
 `point_ratio` measures the true quantities at one point (sqrt(b) exact): the slowdown lambda
@@ -86,6 +86,23 @@ def _same_point(g, h):
 
 
 @jit
+def _jerk_tangent(jerk, jump, b0):
+    """A jerk row's (slope, bound): |L| + slope b <= bound, the tangent at b0 of the limit
+    |L| <= J / sqrt(b) - sqrt(b) jump, where a jump of kappa N read over one period adds
+    b |D| / T to the jerk (jump = |D| / T). Both terms are convex in b, so each one's tangent
+    lies below it; the jump's is taken at b0 or at the jump's own limit J / jump, the lower
+    (beyond it the tangent would cut 0 and leave no b >= 0 feasible)."""
+    root = math.sqrt(b0)
+    slope = 0.5 * jerk / (b0 * root)
+    bound = 1.5 * jerk / root
+    if jump > 0.0:
+        at = math.sqrt(min(b0, jerk / jump))
+        slope += 0.5 * jump / at
+        bound -= 0.5 * jump * at
+    return slope, bound
+
+
+@jit
 def cell_rows(c_lin, cells, geo, q, shared_end, lim_t, acc_t, jerk_n, acc_x, jerk_x, period,
               idx, val, rhs, r):
     """Write the rows of inner cell q, linearized at the coefficients c_lin, from row r on:
@@ -129,7 +146,7 @@ def cell_rows(c_lin, cells, geo, q, shared_end, lim_t, acc_t, jerk_n, acc_x, jer
                 idx[r] = i0
                 rhs[r] = acc_x[x]
                 r += 1
-        # the jerks: |L| + (tangent slope) b <= 3/2 J / sqrt(b0)
+        # the jerks: |L| + (tangent slope) b <= 3/2 J / sqrt(b0) (`_jerk_tangent`)
         slope = 0.5 * lim_t / (b0 * root)
         for sign in (1.0, -1.0):
             for j in range(3):
@@ -142,19 +159,19 @@ def cell_rows(c_lin, cells, geo, q, shared_end, lim_t, acc_t, jerk_n, acc_x, jer
             if jerk_x[x] == np.inf or (abs(tx) <= ZERO_REL and abs(kx) <= ZERO_REL * k_size
                                        and abs(ksx) <= ZERO_REL * ks_size):
                 continue
-            slope = 0.5 * jerk_x[x] / (b0 * root) + abs(g[G_D + x]) / period
+            slope, bound = _jerk_tangent(jerk_x[x], abs(g[G_D + x]) / period, b0)
             for sign in (1.0, -1.0):
                 for j in range(3):
                     val[r, j] = (sign * (0.5 * tx * w[2, j] + 1.5 * kx * w[1, j] + ksx * w[0, j])
                                  + slope * w[0, j])
                 idx[r] = i0
-                rhs[r] = 1.5 * jerk_x[x] / root
+                rhs[r] = bound
                 r += 1
         if not own:
             continue
         nx, ny, nz, kn, kb = _normal_axes(g)
         jump = math.sqrt(g[G_D] ** 2 + g[G_D + 1] ** 2 + g[G_D + 2] ** 2) / period
-        slope = 0.5 * jerk_n / (b0 * root) + jump
+        slope, bound = _jerk_tangent(jerk_n, jump, b0)
         # the inscribed polygon: its sides at cos(pi / NORMAL_SIDES) of the radius; the part
         # along B is b kb >= 0, so only the sides facing it (angles 0 to pi) can bind: those
         # facing away are implied by the two along N
@@ -170,7 +187,7 @@ def cell_rows(c_lin, cells, geo, q, shared_end, lim_t, acc_t, jerk_n, acc_x, jer
                 val[r, j] = (cn * (1.5 * k * w[1, j] + kn * w[0, j]) + cb * kb * w[0, j]
                              + shrink * slope * w[0, j])
             idx[r] = i0
-            rhs[r] = shrink * 1.5 * jerk_n / root
+            rhs[r] = shrink * bound
             r += 1
     return r
 

@@ -62,10 +62,11 @@ class Schedule:
 
 
 @jit
-def static_b(geo, lim_t, jerk_n, acc_x, jerk_x, out):
+def static_b(geo, lim_t, jerk_n, acc_x, jerk_x, period, out):
     """Per cell point (Q, 3): b at which every limit holds with b' = b'' = 0 (a start for the
     first program's linearisation): kappa^2 b^1.5 <= J_t, |K_s + kappa^2 T| b^1.5 <= J_n, per
-    axis |K_x| b <= A_x and |K_s,x| b^1.5 <= J_x, and the cap."""
+    axis |K_x| b <= A_x and |K_s,x| b^1.5 <= J_x, the cap, and where kappa N jumps by D, half
+    of what the jump alone allows (b |D| / T <= J / 2: the rest of the jerk is the curve's)."""
     for q in range(geo.shape[0]):
         for p in range(3):
             g = geo[q, p]
@@ -86,6 +87,11 @@ def static_b(geo, lim_t, jerk_n, acc_x, jerk_x, out):
                 kx = abs(g[G_KS + x])
                 if kx > 0.0 and jerk_x[x] < np.inf:
                     b = min(b, (jerk_x[x] / kx) ** (2.0 / 3.0))
+                if g[G_D + x] != 0.0 and jerk_x[x] < np.inf:
+                    b = min(b, 0.5 * jerk_x[x] * period / abs(g[G_D + x]))
+            jump = math.sqrt(g[G_D] ** 2 + g[G_D + 1] ** 2 + g[G_D + 2] ** 2)
+            if jump > 0.0:
+                b = min(b, 0.5 * jerk_n * period / jump)
             out[q, p] = b
 
 
@@ -168,7 +174,7 @@ def plan_schedule(layout: Layout, lim: Limits, start: np.ndarray | None = None) 
                        SCALE_FLOOR * float(layout.cap.max(initial=1.0)))
     if start is None:
         sb = np.empty((q_n, 3))
-        static_b(geo, lim.jerk_mm_s3, lim.normal_jerk_mm_s3, acc_x, jerk_x, sb)
+        static_b(geo, lim.jerk_mm_s3, lim.normal_jerk_mm_s3, acc_x, jerk_x, lim.period_s, sb)
         start = np.full(n, np.inf)
         i0 = cells[:, 0].astype(np.int64)
         for j in range(3):

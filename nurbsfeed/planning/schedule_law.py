@@ -23,6 +23,7 @@ from nurbsfeed.planning.timelaw import TimeLaw
 
 NEWTON_STEPS = 30
 GAUSS_X, GAUSS_W = np.polynomial.legendre.leggauss(4)
+PIECES = 8  # equal parts of a cell, each timed by GAUSS_X
 
 
 @jit
@@ -37,9 +38,18 @@ def _b_at(c, cells, q, x):
 
 
 @jit
-def _time_between(c, cells, q, x0, x1):
-    """The time from share x0 to share x1 of inner cell q (Gauss-Legendre: b is a smooth
-    positive quadratic there)."""
+def _piece_times(c, cells, q, out):
+    """The time over each of the PIECES equal parts of inner cell q (Gauss-Legendre on each).
+    Their sum is the cell's time as the law counts it, and `_time_to` adds up the same parts,
+    so that the instants found in a cell never run out of it before its time is up (one rule
+    for the whole and its parts, even where b nearly reaches 0 inside)."""
+    part = 1.0 / PIECES
+    for j in range(PIECES):
+        out[j] = _gauss_time(c, cells, q, j * part, (j + 1) * part)
+
+
+@jit
+def _gauss_time(c, cells, q, x0, x1):
     half = 0.5 * (x1 - x0)
     mid = 0.5 * (x1 + x0)
     t = 0.0
@@ -49,24 +59,35 @@ def _time_between(c, cells, q, x0, x1):
 
 
 @jit
+def _time_to(c, cells, q, pieces, x):
+    """The time from the start of inner cell q to share x of it, by `_piece_times`' rule."""
+    j = min(int(x * PIECES), PIECES - 1)
+    t = 0.0
+    for i in range(j):
+        t += pieces[i]
+    return t + _gauss_time(c, cells, q, j / PIECES, x)
+
+
+@jit
 def _sample_stretch(c, cells, cell_node, q_first, q_last, s_nodes, node0, node1, times, rest_t,
                     rest_h, b_far, scale, n, out_s, out_v):
     """s and v (n + 1,) at the n + 1 period instants of one stretch, its time stretched by
-    scale (schedule time = law time / scale). Cells q_first..q_last (inner), the rest cells'
-    durations rest_t (2,), lengths rest_h (2,), far values b_far (2,); s_nodes: the nodes' arc,
-    cell_node: each cell's first node, node0 and node1: the stretch's rests. Within a cell each
-    instant is found by Newton's method from the last one (the time between them by
-    Gauss-Legendre), so every instant costs a few evaluations of b."""
+    scale (schedule time = law time / scale). Cells q_first..q_last (inner) with their times
+    (`_piece_times`), the rest cells' durations rest_t (2,), lengths rest_h (2,), far values
+    b_far (2,); s_nodes: the nodes' arc, cell_node: each cell's first node, node0 and node1:
+    the stretch's rests. Within a cell each instant is found by Newton's method from the last
+    one, safeguarded by bisection."""
     total = rest_t[0] + rest_t[1]
     for q in range(q_first, q_last + 1):
         total += times[q]
     step = total / n
     s_start = s_nodes[node0]
     s_end = s_nodes[node1]
+    pieces = np.empty(PIECES)
     q = q_first
+    _piece_times(c, cells, q, pieces)
     t_cell = rest_t[0]  # the schedule time at which cell q starts
-    x_last = 0.0  # the share of cell q and the time at it of the last instant found there
-    t_last = t_cell
+    x_last = 0.0  # the share of cell q of the last instant found there
     for k in range(n + 1):
         t = k * step
         if k == 0 or k == n:
@@ -86,15 +107,14 @@ def _sample_stretch(c, cells, cell_node, q_first, q_last, s_nodes, node0, node1,
         while q < q_last and t >= t_cell + times[q]:
             t_cell += times[q]
             q += 1
+            _piece_times(c, cells, q, pieces)
             x_last = 0.0
-            t_last = t_cell
         h = cells[q, 4]
-        want = min(t, t_cell + times[q]) - t_last
-        b = _b_at(c, cells, q, x_last)
-        x = min(x_last + want * math.sqrt(b) / h, 1.0)
+        want = min(max(t - t_cell, 0.0), times[q])
         lo, hi = x_last, 1.0
+        x = x_last
         for _ in range(NEWTON_STEPS):
-            f = _time_between(c, cells, q, x_last, x) - want
+            f = _time_to(c, cells, q, pieces, x) - want
             if f > 0.0:
                 hi = x
             else:
@@ -109,8 +129,16 @@ def _sample_stretch(c, cells, cell_node, q_first, q_last, s_nodes, node0, node1,
                 break
         out_s[k] = s_nodes[cell_node[q]] + x * h
         out_v[k] = math.sqrt(_b_at(c, cells, q, x)) / scale
-        t_last += _time_between(c, cells, q, x_last, x)
         x_last = x
+
+
+@jit
+def _law_times(c, cells, times):
+    """Each inner cell's time (Q,) as the law counts it (`_piece_times`)."""
+    pieces = np.empty(PIECES)
+    for q in range(cells.shape[0]):
+        _piece_times(c, cells, q, pieces)
+        times[q] = pieces.sum()
 
 
 def schedule_law(schedule: Schedule, period_s: float, extra_slowdown: float = 1.0
@@ -120,6 +148,7 @@ def schedule_law(schedule: Schedule, period_s: float, extra_slowdown: float = 1.
     times = np.empty(lay.cells.shape[0] + 2 * lay.first.size)
     cell_times(schedule.c, lay.cells, lay.first, lay.last, lay.rest_h, times)
     q_n = lay.cells.shape[0]
+    _law_times(schedule.c, lay.cells, times)
     rests = np.flatnonzero(lay.rest)
     slow = schedule.slowdown * extra_slowdown
     parts: list[list[np.ndarray]] = [[] for _ in range(5)]
