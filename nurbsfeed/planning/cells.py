@@ -47,6 +47,7 @@ from nurbsfeed.planning.path_model import frames, kappa_n_jumps
 G_KAPPA, G_T, G_K, G_KS, G_D, G_CAP = 0, 1, 4, 7, 10, 13
 G_SIZE = 14
 POINTS = (0.0, 0.5, 1.0)  # where a cell's limits are read: its start, middle and end
+BETWEEN = (0.25, 0.75)  # ... and checked once planned (`cut_cells`)
 
 CELL_PERIODS = 4.0  # a cell lasting longer at the speed estimate is cut
 RECUT_SLACK = 2.0  # ... and one the schedule spends over this many times as long in, again
@@ -78,7 +79,8 @@ class Layout:
     coefficient, the rest cells' lengths and the C1 join ratios. Inner cells (Q,): cells (Q, 5)
     = (first coefficient i0, g0 = xi[i0+1] - xi[i0], g1 = xi[i0+2] - xi[i0+1], knot_w[i0], h),
     their first node, and geo (Q, 3, G_SIZE): at each of POINTS kappa, T, K = kappa N,
-    K_s = dK/ds, the jump D of kappa N (at a knot) and the speed cap squared."""
+    K_s = dK/ds, the jump D of kappa N (at a knot) and the speed cap squared; between (Q, 2,
+    G_SIZE) the same at BETWEEN, where the schedule is checked but not planned."""
 
     s_mm: np.ndarray
     u: np.ndarray
@@ -95,6 +97,7 @@ class Layout:
     cells: np.ndarray
     cell_node: np.ndarray
     geo: np.ndarray
+    between: np.ndarray
 
     @property
     def n_coefficients(self) -> int:
@@ -192,14 +195,16 @@ def schedule_nodes(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.nd
     return s_mm, u, rest, speed_estimate(s_mm, cap, _moving_limits(curve, lim)[0], rest)
 
 
-def cut_cells(curve: NurbsCurve, grid: Grid, lim: Limits, layout: Layout, times: np.ndarray
+def cut_cells(curve: NurbsCurve, grid: Grid, lim: Limits, layout: Layout, times: np.ndarray,
+              broken: np.ndarray
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """The nodes of `layout` with each inner cell whose schedule spends times[q] (Q,) over
     CELL_PERIODS * RECUT_SLACK periods in it cut into pieces of CELL_PERIODS (the estimate
-    sized them without jerk, which slows the motion in tight turns far below it), and the
-    speed estimate then; None where none is that long."""
-    parts = np.ceil(times / (CELL_PERIODS * lim.period_s))
-    long = np.flatnonzero(times > CELL_PERIODS * RECUT_SLACK * lim.period_s)
+    sized them without jerk, which slows the motion in tight turns far below it), and each
+    whose schedule breaks a limit BETWEEN its points (broken (Q,)) cut in two at least; and
+    the speed estimate then. None where no cell is either."""
+    parts = np.maximum(np.ceil(times / (CELL_PERIODS * lim.period_s)), np.where(broken, 2, 1))
+    long = np.flatnonzero((times > CELL_PERIODS * RECUT_SLACK * lim.period_s) | broken)
     if long.size == 0:
         return None
     s_mm, node = layout.s_mm, layout.cell_node
@@ -213,10 +218,18 @@ def cut_cells(curve: NurbsCurve, grid: Grid, lim: Limits, layout: Layout, times:
 
 def _insert(curve: NurbsCurve, grid: Grid, s_mm: np.ndarray, u: np.ndarray, rest: np.ndarray,
             v: np.ndarray, extra: list[np.ndarray]) -> tuple[np.ndarray, ...]:
-    """The nodes with those at arc lengths `extra` added (their u from the grid)."""
+    """The nodes with those at arc lengths `extra` added (their u from the grid), but those
+    within MIN_CELL_REL of the curve's length from a node or from one added before them: a
+    cell of a rounding's length has a b'' its rows cannot hold."""
     if not extra:
         return s_mm, u, rest, v
-    more = np.setdiff1d(np.concatenate(extra), s_mm)
+    floor = MIN_CELL_REL * max(float(s_mm[-1]), 1e-300)
+    more = np.unique(np.concatenate(extra))
+    at = np.clip(np.searchsorted(s_mm, more), 1, s_mm.size - 1)
+    near = np.minimum(np.abs(more - s_mm[at - 1]), np.abs(s_mm[at] - more))
+    more = more[near >= floor]
+    if more.size > 1:
+        more = more[np.concatenate(([True], np.diff(more) >= floor))]
     if more.size == 0:
         return s_mm, u, rest, v
     order = np.argsort(np.concatenate([s_mm, more]), kind="stable")
@@ -328,6 +341,11 @@ def build_layout(curve: NurbsCurve, grid: Grid, lim: Limits, s_mm: np.ndarray, u
     geo = point_geometry(curve, lim, pts_u, feed_at_u(pts_u), at_knot)
     q = node.size
     geo3 = np.ascontiguousarray(np.stack([geo[:q], geo[q:2 * q], geo[2 * q:]], axis=1))
+    h_node = s_mm[node + 1] - s_mm[node]
+    mid_u = arc_parameters(curve, grid, np.concatenate([s_mm[node] + x * h_node
+                                                        for x in BETWEEN]))
+    mid = point_geometry(curve, lim, mid_u, feed_at_u(mid_u), np.full(mid_u.size, -1))
+    between = np.ascontiguousarray(np.stack([mid[:q], mid[q:]], axis=1))
     first_a, last_a = np.array(first, dtype=np.int64), np.array(last, dtype=np.int64)
     ratio_a, rest_h_a = np.array(ratio), np.array(rest_h)
     cap = _coefficient_caps(xi_all.size, i0, geo3[:, :, G_CAP].min(axis=1))
@@ -338,7 +356,7 @@ def build_layout(curve: NurbsCurve, grid: Grid, lim: Limits, s_mm: np.ndarray, u
     b_estimate = np.minimum(np.interp(xi_all, s_mm, np.asarray(v_estimate, dtype=float) ** 2),
                             cap)
     arrays = (s_mm, u, rest, xi_all, kw_all, np.concatenate(width), cap, b_estimate, first_a,
-              last_a, rest_h_a, ratio_a, cells_arr, node, geo3)
+              last_a, rest_h_a, ratio_a, cells_arr, node, geo3, between)
     for arr in arrays:
         arr.setflags(write=False)
     return Layout(*arrays)

@@ -26,8 +26,9 @@ from nurbsfeed.planning.timelaw import TimeLaw
 MAX_LAW_PERIODS = 1_000_000
 # past this many cells too: the programs' rows take 4 kB a cell
 MAX_CELLS = 40_000
-# a schedule that dwells in cells far longer than the estimate sized them is planned again on
-# cells cut to size (cells.cut_cells), this many times at most
+# a schedule that dwells in cells far longer than the estimate sized them, or breaks a limit
+# between a cell's points, is planned again on cells cut (cells.cut_cells), this many times at
+# most
 RECUTS = 2
 
 
@@ -83,11 +84,13 @@ def plan_path(curve: NurbsCurve, grid: Grid, lim: Limits, limit: np.ndarray, cap
     for _ in range(RECUTS):
         times = np.empty(layout.cells.shape[0] + 2 * layout.first.size)
         cell_times(schedule.c, layout.cells, layout.first, layout.last, layout.rest_h, times)
-        nodes = cut_cells(curve, grid, lim, layout, times[:layout.cells.shape[0]])
+        nodes = cut_cells(curve, grid, lim, layout, times[:layout.cells.shape[0]],
+                          schedule.broken_between)
         if nodes is None or nodes[0].size > MAX_CELLS:
             break
         finer = build_layout(curve, grid, lim, *nodes, feed_at_u)
-        cut = plan_schedule(finer, lim)
+        # linearised first at the last schedule (its polygon): it is nearly the answer
+        cut = plan_schedule(finer, lim, np.interp(finer.xi, layout.xi, schedule.c))
         if not cut.solved:
             break
         layout, schedule = finer, cut

@@ -89,17 +89,14 @@ def _same_point(g, h):
 def _jerk_tangent(jerk, jump, b0):
     """A jerk row's (slope, bound): |L| + slope b <= bound, the tangent at b0 of the limit
     |L| <= J / sqrt(b) - sqrt(b) jump, where a jump of kappa N read over one period adds
-    b |D| / T to the jerk (jump = |D| / T). Both terms are convex in b, so each one's tangent
-    lies below it; the jump's is taken at b0 or at the jump's own limit J / jump, the lower
-    (beyond it the tangent would cut 0 and leave no b >= 0 feasible)."""
-    root = math.sqrt(b0)
-    slope = 0.5 * jerk / (b0 * root)
-    bound = 1.5 * jerk / root
+    b |D| / T to the jerk (jump = |D| / T). The limit is convex in b, so its tangent lies below
+    it. Where kappa N jumps the tangent is taken at b0 or at the jump's own limit J / jump,
+    the lower: beyond it (where no b'' keeps the jerk anyway) the tangent would cross 0 and
+    leave no b >= 0 feasible."""
     if jump > 0.0:
-        at = math.sqrt(min(b0, jerk / jump))
-        slope += 0.5 * jump / at
-        bound -= 0.5 * jump * at
-    return slope, bound
+        b0 = min(b0, jerk / jump)
+    root = math.sqrt(b0)
+    return 0.5 * jerk / (b0 * root) + 0.5 * jump / root, 1.5 * jerk / root - 0.5 * jump * root
 
 
 @jit
@@ -238,15 +235,15 @@ def point_ratio(g, b, d, dd, lim_t, acc_t, jerk_n, acc_x, vel_x, jerk_x, period)
 
 
 @jit
-def cell_ratios(c, cells, geo, lim_t, acc_t, jerk_n, acc_x, vel_x, jerk_x, period, out):
-    """Per inner cell (Q,): the largest `point_ratio` over its points, b, b', b'' from the
-    coefficients c."""
+def cell_ratios(c, cells, geo, xs, lim_t, acc_t, jerk_n, acc_x, vel_x, jerk_x, period, out):
+    """Per inner cell (Q,): the largest `point_ratio` over its points at shares xs (P,) with
+    the geometry geo (Q, P, G_SIZE) there, b, b', b'' from the coefficients c."""
     w = np.empty((3, 3))
     for q in range(cells.shape[0]):
         i0 = int(cells[q, 0])
         worst = 0.0
-        for p in range(3):
-            point_weights(cells[q, 1], cells[q, 2], cells[q, 3], cells[q, 4], 0.5 * p, w)
+        for p in range(xs.size):
+            point_weights(cells[q, 1], cells[q, 2], cells[q, 3], cells[q, 4], xs[p], w)
             b = w[0, 0] * c[i0] + w[0, 1] * c[i0 + 1] + w[0, 2] * c[i0 + 2]
             d = w[1, 0] * c[i0] + w[1, 1] * c[i0 + 1] + w[1, 2] * c[i0 + 2]
             dd = w[2, 0] * c[i0] + w[2, 1] * c[i0 + 1] + w[2, 2] * c[i0 + 2]

@@ -25,7 +25,8 @@ import numpy as np
 
 from nurbsfeed.jit import jit
 from nurbsfeed.planning.banded_lp import solve_lp
-from nurbsfeed.planning.cells import G_CAP, G_D, G_K, G_KAPPA, G_KS, G_T, Layout, point_weights
+from nurbsfeed.planning.cells import (BETWEEN, G_CAP, G_D, G_K, G_KAPPA, G_KS, G_T, POINTS,
+                                     Layout, point_weights)
 from nurbsfeed.planning.limits import Limits
 from nurbsfeed.planning.rows import ROWS_PER_POINT, all_rows, cell_ratios
 
@@ -43,6 +44,9 @@ HIST = np.full((100, 5), np.nan)
 BROKEN_REL = 1e-6
 ROUNDING_REL = 1e-12
 CUT_REACH = 3  # ... with the rows of this many coefficients on either side
+# a cell whose schedule breaks a limit between its points by more than this share (of the
+# speed: a third of it in a jerk) is cut and the curve planned again (path_plan.RECUTS)
+BETWEEN_REL = 1e-3
 SCALE_FLOOR = 1e-9  # of the largest cap: the least scale a variable takes
 GAUSS_X, GAUSS_W = np.polynomial.legendre.leggauss(8)
 
@@ -51,7 +55,9 @@ GAUSS_X, GAUSS_W = np.polynomial.legendre.leggauss(8)
 class Schedule:
     """The planned spline: its coefficients c (C,) on the layout, the cycle they take (s,
     before whole periods), the uniform slowdown (>= 1) the last check asked for, the
-    programs solved, and whether one was (if not, c is the start, slowed)."""
+    programs solved, whether one was (if not, c is the start, slowed), and the inner cells
+    (Q,) in which c breaks a limit by more than BETWEEN_REL between the points the programs
+    read (at cells.BETWEEN)."""
 
     layout: Layout
     c: np.ndarray
@@ -59,6 +65,7 @@ class Schedule:
     slowdown: float
     programs: int
     solved: bool
+    broken_between: np.ndarray
 
 
 @jit
@@ -254,11 +261,15 @@ def plan_schedule(layout: Layout, lim: Limits, start: np.ndarray | None = None) 
         best_c = np.minimum(start, layout.cap)
         best_t = cell_times(best_c, cells, layout.first, layout.last, layout.rest_h, times)
     ratios = np.empty(q_n)
-    cell_ratios(best_c, cells, geo, lim.jerk_mm_s3, lim.acc_mm_s2, lim.normal_jerk_mm_s3, acc_x,
-                vel_x, jerk_x, lim.period_s, ratios)
+    cell_ratios(best_c, cells, geo, np.array(POINTS), lim.jerk_mm_s3, lim.acc_mm_s2,
+                lim.normal_jerk_mm_s3, acc_x, vel_x, jerk_x, lim.period_s, ratios)
     slowdown = max(1.0, float(ratios.max(initial=0.0)))
+    between = np.empty(q_n)
+    cell_ratios(best_c, cells, layout.between, np.array(BETWEEN), lim.jerk_mm_s3, lim.acc_mm_s2,
+                lim.normal_jerk_mm_s3, acc_x, vel_x, jerk_x, lim.period_s, between)
     best_c.setflags(write=False)
-    return Schedule(layout, best_c, float(best_t), slowdown, programs, solved)
+    return Schedule(layout, best_c, float(best_t), slowdown, programs, solved,
+                    between > 1.0 + BETWEEN_REL)
 
 
 def _join_rests(layout: Layout, c: np.ndarray) -> None:

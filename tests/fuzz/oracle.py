@@ -77,10 +77,13 @@ class Outcome:
 
 
 _armed = False  # a case is running: the alarm may stop it
+_fired = False  # ... and it did
 
 
 def _alarm(signum: int, frame: object) -> None:
+    global _fired
     if _armed:
+        _fired = True
         raise CaseTimeout
 
 
@@ -89,8 +92,9 @@ def run_cli(args: list[str], time_limit_s: float | None = None) -> tuple[int | N
     time_limit_s = TIME_LIMIT_S if time_limit_s is None else time_limit_s
     import traceback
 
-    global _armed
+    global _armed, _fired
     stderr = io.StringIO()
+    _fired = False
     previous = signal.signal(signal.SIGPROF, _alarm)
     code: int | None
     crash = ""
@@ -107,13 +111,17 @@ def run_cli(args: list[str], time_limit_s: float | None = None) -> tuple[int | N
             except SystemExit as exc:
                 code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
     except CaseTimeout:
-        code, crash = None, f"timeout: more than {time_limit_s:g} s of CPU"
+        _fired = True
     except BaseException:  # noqa: BLE001 - anything escaping the CLI is what we look for
         code, crash = None, traceback.format_exc()
     finally:
         _armed = False
         signal.setitimer(signal.ITIMER_PROF, 0)
         signal.signal(signal.SIGPROF, previous)
+    if _fired:
+        # raised inside compiled code, the time-out can reach the CLI wrapped (numba's
+        # dispatcher returns it as a SystemError, which the CLI reports as an internal error)
+        code, crash = None, f"timeout: more than {time_limit_s:g} s of CPU"
     return code, stderr.getvalue(), crash
 
 
