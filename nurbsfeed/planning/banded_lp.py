@@ -27,6 +27,8 @@ TOL_FEAS = 1e-7
 ROW_FLOOR = 1e-9  # ... or over this, for a bound near 0
 TOL_DUAL = 1e-6  # dual residual (the objective scaled to a largest coefficient of 1)
 STEP_SHARE = 0.995  # of the longest step keeping s, z > 0
+SHORT_STEP = 0.1  # a step this short on either side: the next one aims at ...
+CENTRE_SHARE = 0.5  # ... this share of the complementarity at least (a centring step)
 STALL_STEP = 0.05  # steps this short on both sides ...
 STALL_ITER = 4  # ... this many times in a row: the iterate is as good as it gets
 
@@ -222,6 +224,7 @@ def solve_lp(n, ridx, rval, rhs, f, u, scale, x_start, hist):
             n_ineq += 2
     status = 1
     stalled = 0
+    short = False
     # the best primal-feasible iterate (least objective), returned where the dual side stalls
     best_y = y.copy()
     best_obj = np.inf
@@ -235,6 +238,7 @@ def solve_lp(n, ridx, rval, rhs, f, u, scale, x_start, hist):
             r_pred[i] = r_cor[i] = r_inv[i] = 0.0
         mu = 0.0
         res_p = 0.0
+        res_abs = 0.0
         for r in range(m):
             i = ridx[r]
             c0, c1, c2 = a0[r], a1[r], a2[r]
@@ -242,6 +246,7 @@ def solve_lp(n, ridx, rval, rhs, f, u, scale, x_start, hist):
             v = sr - b[r] + c0 * y[i] + c1 * y[i + 1] + c2 * y[i + 2]
             rp[r] = v
             res_p = max(res_p, abs(v) / (abs(b[r]) + ROW_FLOOR))
+            res_abs = max(res_abs, abs(v))
             mu += sr * zr
             rd[i] += c0 * zr
             rd[i + 1] += c1 * zr
@@ -272,14 +277,14 @@ def solve_lp(n, ridx, rval, rhs, f, u, scale, x_start, hist):
         if mu < TOL_GAP and res_p < TOL_FEAS and res_d < TOL_DUAL:
             status = 0
             break
-        if res_p < TOL_FEAS:
+        if res_abs < TOL_FEAS:
             obj = 0.0
             for i in range(n):
                 obj += g[i] * y[i]
             if obj < best_obj:
                 best_obj = obj
                 best_y[:] = y
-            if mu < TOL_GAP:  # the gap closed, the dual residual stalled on rounding
+            if mu < TOL_GAP and res_p < TOL_FEAS:  # the dual residual stalled on rounding
                 status = 0
                 break
         if not _penta_factor(d0, d1, d2, l0, l1, l2):
@@ -316,6 +321,9 @@ def solve_lp(n, ridx, rval, rhs, f, u, scale, x_start, hist):
                 coru[i] = -dy[i] * dzu[i]
         mu_aff /= max(n_ineq, 1)
         target = (mu_aff / mu) ** 3 * mu
+        if short:
+            # the last step was blocked (Mehrotra's target too greedy for this iterate): centre
+            target = max(target, CENTRE_SHARE * mu)
         for r in range(m):
             ds[r] = ds[r] * dz[r]  # the corrector term ds dz, kept in ds until the next steps
         for i in range(nn):
@@ -335,6 +343,7 @@ def solve_lp(n, ridx, rval, rhs, f, u, scale, x_start, hist):
                                         dzl, dzu, alpha_p, alpha_d)
         alpha_p = min(1.0, STEP_SHARE * alpha_p)
         alpha_d = min(1.0, STEP_SHARE * alpha_d)
+        short = min(alpha_p, alpha_d) < SHORT_STEP
         stalled = stalled + 1 if max(alpha_p, alpha_d) < STALL_STEP else 0
         if stalled >= STALL_ITER:
             break
@@ -354,7 +363,27 @@ def solve_lp(n, ridx, rval, rhs, f, u, scale, x_start, hist):
     if status != 0 and best_obj < np.inf:
         y[:] = best_y
         status = 0
+    if status == 0:
+        _scale_into_rows(ridx, a0, a1, a2, b, y)
     return _unscaled(y, free, top, scale, n), status
+
+
+@jit
+def _scale_into_rows(ridx, a0, a1, a2, b, y):
+    """y scaled down until it keeps every row exactly where every bound is >= 0 (0 keeps them
+    all, and a row is linear in y): the best iterate of a program that stalled breaks the rows
+    with bounds near 0 by a share of their bound, beyond its absolute tolerance."""
+    share = 1.0
+    for r in range(ridx.size):
+        if b[r] < 0.0:
+            return
+        i = ridx[r]
+        left = a0[r] * y[i] + a1[r] * y[i + 1] + a2[r] * y[i + 2]
+        if left > b[r]:
+            share = min(share, b[r] / left)
+    if share < 1.0:
+        for i in range(y.size):
+            y[i] *= share
 
 
 @jit

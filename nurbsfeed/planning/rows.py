@@ -45,6 +45,7 @@ ZERO_REL = 1e-12
 # at most: 2 tangential accelerations, 6 axis accelerations, 2 tangential jerks, 6 axis
 # jerks, the normal jerk's half polygon (or its 2 rows where the curve is planar)
 ROWS_PER_POINT = 2 + 6 + 2 + 6 + NORMAL_SIDES // 2 + 1
+SHARE_ENDS = False
 # the largest b a linearization point takes, and the smallest: b0 of a row's sqrt(b)
 B_FLOOR = 1e-12
 
@@ -195,7 +196,7 @@ def all_rows(c_lin, cells, geo, lim_t, acc_t, jerk_n, acc_x, jerk_x, period, idx
     r = 0
     q_n = cells.shape[0]
     for q in range(q_n):
-        shared = (q + 1 < q_n and int(cells[q + 1, 0]) == int(cells[q, 0]) + 1
+        shared = (SHARE_ENDS and q + 1 < q_n and int(cells[q + 1, 0]) == int(cells[q, 0]) + 1
                   and _same_point(geo[q, 2], geo[q + 1, 0]))
         r = cell_rows(c_lin, cells, geo, q, shared, lim_t, acc_t, jerk_n, acc_x, jerk_x,
                       period, idx, val, rhs, r)
