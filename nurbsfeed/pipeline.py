@@ -37,7 +37,8 @@ from nurbsfeed.gcode.writer import (
     rapid_line,
 )
 from nurbsfeed.geometry import NurbsCurve
-from nurbsfeed.interpolate import Landing, PointChunk, Stepping
+from nurbsfeed.interpolate.landing import Landing
+from nurbsfeed.interpolate.stepping import PointChunk, Stepping
 from nurbsfeed.machine import FLOOR_MARGIN, Machine
 from nurbsfeed.planning.chain import Chain, Joints, chain_feed, joint_feed, joints, merge_curves
 from nurbsfeed.planning.limits import Limits
@@ -403,7 +404,7 @@ def convert_window(window: ChainWindow, index: int, out: BinaryIO, machine: Mach
     """Replace a chain of curve blocks (one or more, in mm) by one comment line and G1 moves,
     with the lines read between the curves written in place; one result per curve.
 
-    The chain is stepped chunk by chunk (interpolate.Stepping) and every chunk goes to the
+    The chain is stepped chunk by chunk (interpolate.stepping.Stepping) and every chunk goes to the
     writer (and the trace) before the next is stepped: memory does not grow with the chain's
     duration. A chain the planner refuses is refused before anything of it is written.
     `block` comes in mm, converted once when read, and written back in its unit by the writer.

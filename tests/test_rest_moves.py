@@ -12,7 +12,7 @@ import pytest
 
 from nurbsfeed.gcode.writer import MoveWriter, round_ticks
 from nurbsfeed.geometry import NurbsCurve
-from nurbsfeed.interpolate import PointChunk, interpolate
+from nurbsfeed.interpolate.stepping import PointChunk, interpolate
 from nurbsfeed.machine import load_machine
 from nurbsfeed.pipeline import RestMoves, convert_file, plan_block, rest_move_periods
 from nurbsfeed.program import CurveBlock
