@@ -53,7 +53,7 @@ def plan(input: Path, dialect: str, reference: bool, **kwargs: Any) -> None:
 
     if reference:
         try:
-            importlib.import_module("nurbsfeed.analysis.bound")  # scipy, an extra
+            importlib.import_module("nurbsfeed.analysis.bound.solve")  # scipy, an extra
         except ImportError:
             click.echo(REFERENCE_NEEDS_SCIPY, err=True)
             sys.exit(EXIT_BAD_INPUT)
@@ -155,7 +155,7 @@ def _echo_stretches(p: Plan, unit: str) -> None:
 def _reference_line(block: CurveBlock, machine: Machine, cycle_s: float, bound_s: float
                     ) -> str:
     """`plan --reference`: the jerk-limited reference schedule's cycle and the plan's ratio."""
-    from nurbsfeed.analysis.bound import jerk_limited_schedule
+    from nurbsfeed.analysis.bound.solve import jerk_limited_schedule
 
     try:
         ref = jerk_limited_schedule(block.curve, machine.limits, block.feed_u, block.feed_mm_s)
