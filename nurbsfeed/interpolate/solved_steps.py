@@ -11,7 +11,7 @@ ds (`_arc_step`, adaptive Gauss-Legendre), then the chord root from there on, un
 reaches ds only where the arc exceeds LEG_ARC_MAX ds (the far leg): then the arc root stands.
 
 Across a knot where rk2c's chord stays off its target, the chord equation is solved from du = 0
-(`chord_step`).
+(`chord_step`). The arc of a piece of the curve is geometry.arclength's (`arc_length`).
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ import math
 
 import numpy as np
 
+from nurbsfeed.geometry.arclength import arc_length
 from nurbsfeed.geometry.kernel import find_span, point_d1
 from nurbsfeed.jit import jit
 
@@ -32,87 +33,10 @@ CHORD_ITERATIONS = 200
 EPS = float(np.finfo(float).eps)
 
 
-# Gauss-Legendre, 5 points on [-1, 1]: the arc of a piece of the curve (`_arc`)
-GAUSS_X = (-0.906179845938664, -0.5384693101056831, 0.0, 0.5384693101056831, 0.906179845938664)
-GAUSS_W = (0.23692688505618928, 0.4786286704993663, 0.5688888888888887, 0.4786286704993663,
-           0.23692688505618928)
 ARC_REL_TOL = 1e-12  # of the target: what `_arc_step` resolves the arc of a step to
-ARC_MAX_DEPTH = 48  # halvings of a piece by `_arc`: far below any step's rounding
-ARC_MAX_PIECES = 4096  # pieces `_arc` splits at most
 # `leg_step`: a chord root whose arc exceeds its target this much (relative) lies past a
 # turn-back (rk2c's own arc exceeds its chord by 4.6 % where the tangent turns 60 degrees)
 LEG_ARC_MAX = 1.1
-
-
-@jit
-def _gauss_arc(knots, coef, degree, n_ctrl, a, b, span):
-    """Integral of |C'| over [a, b] by 5-point Gauss-Legendre, and the span last used."""
-    half = 0.5 * (b - a)
-    mid = 0.5 * (a + b)
-    total = 0.0
-    for i in range(5):
-        x = mid + half * GAUSS_X[i]
-        span = find_span(knots, degree, n_ctrl, x, span)
-        _, _, _, dx, dy, dz = point_d1(knots, coef, degree, span, x)
-        total += GAUSS_W[i] * math.sqrt(dx * dx + dy * dy + dz * dz)
-    return half * total, span
-
-
-@jit
-def _arc(knots, coef, degree, n_ctrl, a, b, tol, span):
-    """The arc length of C over [a, b] (a <= b) to about tol, by adaptive Gauss-Legendre: a
-    piece is halved until its halves add up to it within its share of tol and to no less than
-    its chord. |C'| has a kink where C' = 0 and a narrow dip where it nearly vanishes, which a
-    fixed rule misses; where the curve rests over most of [a, b] (coincident control points)
-    every node of the rule can fall on the rest, and only the chord shows the piece moved."""
-    if b <= a:  # a piece narrower than u's rounding
-        return 0.0
-    stack_a = np.empty(ARC_MAX_DEPTH + 2)
-    stack_b = np.empty(ARC_MAX_DEPTH + 2)
-    stack_q = np.empty(ARC_MAX_DEPTH + 2)
-    whole, span = _gauss_arc(knots, coef, degree, n_ctrl, a, b, span)
-    # positions carry rounding of EPS times their coordinates, and so does any arc from them:
-    # no piece is split for less (a step of 10 nm asks 1e-20 mm of tol)
-    span = find_span(knots, degree, n_ctrl, a, span)
-    ax, ay, az, _, _, _ = point_d1(knots, coef, degree, span, a)
-    floor = 8.0 * EPS * (abs(ax) + abs(ay) + abs(az))
-    stack_a[0] = a
-    stack_b[0] = b
-    stack_q[0] = whole
-    top = 1
-    total = 0.0
-    width = b - a
-    pieces = 0
-    while top > 0:
-        top -= 1
-        lo = stack_a[top]
-        hi = stack_b[top]
-        q = stack_q[top]
-        mid = 0.5 * (lo + hi)
-        left, span = _gauss_arc(knots, coef, degree, n_ctrl, lo, mid, span)
-        right, span = _gauss_arc(knots, coef, degree, n_ctrl, mid, hi, span)
-        span = find_span(knots, degree, n_ctrl, lo, span)
-        ax, ay, az, _, _, _ = point_d1(knots, coef, degree, span, lo)
-        span = find_span(knots, degree, n_ctrl, hi, span)
-        bx, by, bz, _, _, _ = point_d1(knots, coef, degree, span, hi)
-        chord = math.sqrt((bx - ax) ** 2 + (by - ay) ** 2 + (bz - az) ** 2)
-        # beside the tolerance, a floor of rounding (tol may lie below it) and a cap on the
-        # pieces: the work stays bounded however tight tol is
-        pieces += 1
-        slack = max(tol * (hi - lo) / width, 8.0 * EPS * abs(left + right), floor)
-        if ((abs(left + right - q) <= slack and left + right >= chord - slack)
-                or top >= ARC_MAX_DEPTH or pieces >= ARC_MAX_PIECES or mid <= lo or mid >= hi):
-            total += left + right
-            continue
-        # the right half first on the stack's top: the pieces are summed from a to b
-        stack_a[top] = mid
-        stack_b[top] = hi
-        stack_q[top] = right
-        stack_a[top + 1] = lo
-        stack_b[top + 1] = mid
-        stack_q[top + 1] = left
-        top += 2
-    return total
 
 
 @jit
@@ -139,7 +63,7 @@ def _arc_step(knots, coef, degree, n_ctrl, u, ds, guess, span):
     lo = 0.0
     arc_lo = 0.0
     hi = guess
-    arc_hi = _arc(knots, coef, degree, n_ctrl, u, u + hi, tol, span)
+    arc_hi = arc_length(knots, coef, degree, n_ctrl, u, u + hi, tol, span)
     u_range = knots[knots.size - 1] - knots[0]
     for _ in range(CHORD_ITERATIONS):
         if arc_hi >= ds:
@@ -149,7 +73,7 @@ def _arc_step(knots, coef, degree, n_ctrl, u, ds, guess, span):
         lo = hi
         arc_lo = arc_hi
         hi *= 2.0
-        arc_hi = arc_lo + _arc(knots, coef, degree, n_ctrl, u + lo, u + hi, tol, span)
+        arc_hi = arc_lo + arc_length(knots, coef, degree, n_ctrl, u + lo, u + hi, tol, span)
     g_lo = arc_lo - ds
     g_hi = arc_hi - ds
     side = 0.0
@@ -159,7 +83,7 @@ def _arc_step(knots, coef, degree, n_ctrl, u, ds, guess, span):
         x = (lo * g_hi - hi * g_lo) / (g_hi - g_lo)
         if x <= lo or x >= hi:
             x = 0.5 * (lo + hi)
-        arc_x = arc_lo + _arc(knots, coef, degree, n_ctrl, u + lo, u + x, tol, span)
+        arc_x = arc_lo + arc_length(knots, coef, degree, n_ctrl, u + lo, u + x, tol, span)
         g = arc_x - ds
         if g < 0.0:
             arc_lo = arc_x
@@ -196,7 +120,7 @@ def leg_step(knots, coef, degree, n_ctrl, u, px, py, pz, ds, guess, span):
         hi = lo + width
         span = find_span(knots, degree, n_ctrl, u + hi, span)
         cx, cy, cz, _, _, _ = point_d1(knots, coef, degree, span, u + hi)
-        arc += _arc(knots, coef, degree, n_ctrl, u + lo, u + hi, ARC_REL_TOL * ds, span)
+        arc += arc_length(knots, coef, degree, n_ctrl, u + lo, u + hi, ARC_REL_TOL * ds, span)
         if arc > LEG_ARC_MAX * ds:
             return du_arc
         if math.sqrt((cx - px) ** 2 + (cy - py) ** 2 + (cz - pz) ** 2) >= ds:

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nurbsfeed.analysis.bound.frames import Geometry, derivatives3, geometry
+from nurbsfeed.geometry.arclength import gauss_lengths
 from nurbsfeed.geometry.nurbs import NurbsCurve
 from nurbsfeed.planning.limits import Limits
 
@@ -58,12 +59,10 @@ def rest_parameters(curve: NurbsCurve) -> np.ndarray:
 def gauss_length(curve: NurbsCurve, u0: np.ndarray, u1: np.ndarray, spans: np.ndarray
                   ) -> np.ndarray:
     """Arc length from u0 to u1 (both (M,), on `spans`) by Gauss-Legendre on |C'|."""
-    x, w = np.polynomial.legendre.leggauss(GAUSS_POINTS)
-    half = (u1 - u0) / 2
-    uq = (u0 + u1)[:, None] / 2 + half[:, None] * x[None, :]
-    c1 = derivatives3(curve, uq.ravel(), np.repeat(spans, GAUSS_POINTS))[1]
-    speed = np.linalg.norm(c1, axis=1).reshape(uq.shape)
-    return half * (speed @ w)
+    def speed(u: np.ndarray) -> np.ndarray:  # the nodes of piece i on spans[i]
+        return np.linalg.norm(derivatives3(curve, u, np.repeat(spans, GAUSS_POINTS))[1], axis=1)
+
+    return gauss_lengths(speed, u0, u1, GAUSS_POINTS)
 
 
 @dataclass(frozen=True, eq=False)
