@@ -19,7 +19,7 @@ from matplotlib.figure import Figure
 
 from nurbsfeed.analysis import PAPER_TABLE2, RunSeries
 from nurbsfeed.files import atomic_output
-from nurbsfeed.interpolate import Interpolation
+from nurbsfeed.interpolate.stepping import Interpolation
 from nurbsfeed.planning.plan import KIND_NAMES, Plan
 
 LIMIT_STYLE = {"color": "tab:red", "linestyle": "--", "linewidth": 1.2}

@@ -13,7 +13,7 @@ import numpy as np
 
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.geometry.nurbs import curvature_from_derivatives
-from nurbsfeed.interpolate import Interpolation
+from nurbsfeed.interpolate.stepping import Interpolation
 from nurbsfeed.planning.limits import Limits
 from tests.naive_nurbs import chord_speed_limit
 

@@ -18,7 +18,8 @@ from nurbsfeed.analysis import CHECKS, check_files, compare_file, curve_blocks
 from nurbsfeed.analysis.check import project_points
 from nurbsfeed.analysis.check.estimates import derivative_estimate, stencils
 from nurbsfeed.analysis.geometry import chord_errors_mm
-from nurbsfeed.interpolate import METHODS, interpolate
+from nurbsfeed.interpolate.kernels import METHODS
+from nurbsfeed.interpolate.stepping import interpolate
 from nurbsfeed.machine import load_machine
 from nurbsfeed.pipeline import convert_file, plan_block
 from tests.conftest import SAMPLES, load_curve

@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from nurbsfeed.analysis.bound import derivatives3, geometry, jerk_limited_schedule
+from nurbsfeed.analysis.bound.frames import derivatives3, geometry
+from nurbsfeed.analysis.bound.solve import jerk_limited_schedule
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.machine import machine_from_mapping
 from nurbsfeed.planning.limits import Limits

@@ -212,8 +212,8 @@ def test_plot_of_a_curve_that_is_not_there_exits_2(tmp_path: Path) -> None:
 def test_plan_reference_without_scipy_says_how_to_get_it(monkeypatch: pytest.MonkeyPatch) -> None:
     for name in [m for m in sys.modules if m.split(".")[0] == "scipy"] + ["scipy"]:
         monkeypatch.setitem(sys.modules, name, None)  # as if not installed: imports fail
-    monkeypatch.delitem(sys.modules, "nurbsfeed.analysis.bound", raising=False)
-    monkeypatch.delattr("nurbsfeed.analysis.bound", raising=False)
+    monkeypatch.delitem(sys.modules, "nurbsfeed.analysis.bound.solve", raising=False)
+    monkeypatch.delattr("nurbsfeed.analysis.bound.solve", raising=False)
     code, stdout, stderr = run("plan", BUTTERFLY, "--reference")
     assert code == 2 and stdout == ""
     assert stderr == ("nurbsfeed plan --reference needs scipy: "

@@ -25,7 +25,7 @@ from nurbsfeed.analysis.check import check_files
 from nurbsfeed.cli import main
 from nurbsfeed.gcode.writer import MoveWriter
 from nurbsfeed.geometry import NurbsCurve
-from nurbsfeed.interpolate import interpolate
+from nurbsfeed.interpolate.stepping import interpolate
 from nurbsfeed.machine import load_machine
 from nurbsfeed.pipeline import convert_file
 from nurbsfeed.planning.limits import Limits

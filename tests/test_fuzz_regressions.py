@@ -15,7 +15,7 @@ from nurbsfeed.analysis.check.curve_checks import foot_arcs
 from nurbsfeed.analysis.check.projection import feet_ahead_of_behind, project_points_and_others
 from nurbsfeed.cli import main
 from nurbsfeed.geometry import NurbsCurve
-from nurbsfeed.interpolate import interpolate
+from nurbsfeed.interpolate.stepping import interpolate
 from nurbsfeed.machine import load_machine
 from nurbsfeed.pipeline import plan_block
 from nurbsfeed.planning.plan import KIND_CUSP

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from nurbsfeed.readers import json_curves
+from nurbsfeed.readers import json_text
 from nurbsfeed.readers.json_curves import read_json_curves
 from tests.bench.programs import json_program
 from tests.test_cli import run
@@ -135,7 +135,7 @@ def test_curves_read_in_small_pieces_are_the_curves_read_whole(tmp_path: Path,
     src = tmp_path / "in.json"
     src.write_text(json.dumps({"curves": curves, "units": "in"}, ensure_ascii=False, indent=1))
     whole = read_json_curves(src)
-    monkeypatch.setattr(json_curves, "PIECE_BYTES", 7)
+    monkeypatch.setattr(json_text, "PIECE_BYTES", 7)
     pieces = read_json_curves(src)
     assert whole[0] == pieces[0] == "in"
     assert [c.name for c, _ in whole[1]] == [c.name for c, _ in pieces[1]]
@@ -153,17 +153,17 @@ def test_memory_holds_one_curve_not_the_file(tmp_path: Path,
     curves[30]["name"] = "x" * 50_000  # one long value, on the one line of the file
     src.write_text(json.dumps({"curves": curves}))
     longest = max(len(json.dumps(c)) for c in curves)
-    monkeypatch.setattr(json_curves, "PIECE_BYTES", 1024)
+    monkeypatch.setattr(json_text, "PIECE_BYTES", 1024)
     widest = 0
-    more = json_curves._JsonText._more
+    more = json_text.JsonText._more
 
-    def measured(self: json_curves._JsonText) -> bool:
+    def measured(self: json_text.JsonText) -> bool:
         nonlocal widest
         grew = more(self)
         widest = max(widest, len(self.window))
         return grew
 
-    monkeypatch.setattr(json_curves._JsonText, "_more", measured)
+    monkeypatch.setattr(json_text.JsonText, "_more", measured)
     units, read = read_json_curves(src)
     bound = 2 * longest + 3 * 1024
     assert len(read) == 200 and read[30][0].name == "x" * 50_000

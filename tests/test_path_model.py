@@ -17,7 +17,7 @@ from nurbsfeed.analysis.common import curve_blocks
 from nurbsfeed.errors import CurveError, ProfileError
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.geometry.nurbs import curvature_from_derivatives
-from nurbsfeed.interpolate import interpolate
+from nurbsfeed.interpolate.stepping import interpolate
 from nurbsfeed.machine import load_machine, machine_from_mapping
 from nurbsfeed.pipeline import convert_file, plan_block
 from nurbsfeed.planning.path_check import least_cycle_s

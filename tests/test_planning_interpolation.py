@@ -10,7 +10,9 @@ import pytest
 from nurbsfeed.analysis import time_optimal_bound_s
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.geometry.nurbs import curvature_from_derivatives
-from nurbsfeed.interpolate import BUMP_MAX_SLOWDOWN, BUMP_PERIODS, METHODS, interpolate
+from nurbsfeed.interpolate.kernels import METHODS
+from nurbsfeed.interpolate.landing import BUMP_MAX_SLOWDOWN, BUMP_PERIODS
+from nurbsfeed.interpolate.stepping import interpolate
 from nurbsfeed.machine import load_machine
 from nurbsfeed.planning.limits import Limits, curvature_threshold
 from nurbsfeed.planning.plan import KIND_PEAK

@@ -13,7 +13,7 @@ from nurbsfeed.cli import main
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.geometry.nurbs import curvature_from_derivatives
 from nurbsfeed.geometry.peaks import near_cusp_peaks
-from nurbsfeed.interpolate import interpolate
+from nurbsfeed.interpolate.stepping import interpolate
 from nurbsfeed.machine import load_machine
 from nurbsfeed.planning.planner import plan_curve
 from nurbsfeed.readers import read_program

@@ -1,5 +1,5 @@
 """Moves from and into a rest made of several planned periods (profile key rest_move_s,
-pipeline.RestMoves): which points merge, that every written point is a planned point, and that
+rest_moves.RestMoves): which points merge, that every written point is a planned point, and that
 the F words still add up to the planned cycle."""
 
 from __future__ import annotations
@@ -12,11 +12,12 @@ import pytest
 
 from nurbsfeed.gcode.writer import MoveWriter, round_ticks
 from nurbsfeed.geometry import NurbsCurve
-from nurbsfeed.interpolate import PointChunk, interpolate
+from nurbsfeed.interpolate.stepping import PointChunk, interpolate
 from nurbsfeed.machine import load_machine
-from nurbsfeed.pipeline import RestMoves, convert_file, plan_block, rest_move_periods
+from nurbsfeed.pipeline import convert_file, plan_block
 from nurbsfeed.program import CurveBlock
 from nurbsfeed.readers import read_program
+from nurbsfeed.rest_moves import RestMoves, rest_move_periods
 from tests.conftest import SAMPLES
 from tests.gcode_parse import moves
 

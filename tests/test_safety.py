@@ -10,7 +10,7 @@ import pytest
 
 from nurbsfeed.analysis.common import curve_blocks
 from nurbsfeed.errors import CurveError
-from nurbsfeed.interpolate import interpolate
+from nurbsfeed.interpolate.stepping import interpolate
 from nurbsfeed.machine import machine_from_mapping
 from nurbsfeed.pipeline import plan_block
 from nurbsfeed.planning.planner import plan_curve

@@ -16,7 +16,8 @@ from numpy.polynomial.legendre import leggauss
 
 from nurbsfeed.cli import main
 from nurbsfeed.geometry import NurbsCurve
-from nurbsfeed.interpolate import LEG_ARC_MAX, Interpolation, interpolate
+from nurbsfeed.interpolate.solved_steps import LEG_ARC_MAX
+from nurbsfeed.interpolate.stepping import Interpolation, interpolate
 from nurbsfeed.machine import machine_from_mapping
 from nurbsfeed.pipeline import plan_block
 from nurbsfeed.planning.planner import plan_curve

@@ -15,10 +15,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nurbsfeed import interpolate as interpolate_module
 from nurbsfeed import pipeline
 from nurbsfeed.errors import CurveError
-from nurbsfeed.interpolate import BUMP_PERIODS, Stepping, interpolate
+from nurbsfeed.interpolate import stepping as stepping_module
+from nurbsfeed.interpolate.landing import BUMP_PERIODS
+from nurbsfeed.interpolate.stepping import Stepping, interpolate
 from nurbsfeed.machine import load_machine
 from nurbsfeed.pipeline import convert_block, convert_file, plan_block
 from nurbsfeed.planning.limits import Limits
@@ -69,7 +70,7 @@ def test_small_chunks_write_the_same_program_and_trace_as_one_chunk(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, method: str) -> None:
     source = many_period_program(tmp_path)
     whole = converted(source, tmp_path / "whole.nc", method)
-    monkeypatch.setattr(interpolate_module, "CHUNK_PERIODS", SMALL_CHUNK)
+    monkeypatch.setattr(stepping_module, "CHUNK_PERIODS", SMALL_CHUNK)
     chunked = converted(source, tmp_path / "chunked.nc", method)
     assert chunked[0] == whole[0]
     assert chunked[1] == whole[1]
@@ -98,7 +99,7 @@ def test_in_memory_interpolation_is_the_streamed_one(monkeypatch: pytest.MonkeyP
     curve = line([[0, 0], [30, 5], [60, 0]], degree=2)
     plan = plan_curve(curve, paper_limits)
     whole = interpolate(plan)
-    monkeypatch.setattr(interpolate_module, "CHUNK_PERIODS", SMALL_CHUNK)
+    monkeypatch.setattr(stepping_module, "CHUNK_PERIODS", SMALL_CHUNK)
     chunks = list(Stepping(plan).chunks())
     assert len(chunks) > plan.n_periods // SMALL_CHUNK
     assert np.array_equal(np.concatenate([c.points for c in chunks]), whole.points)
@@ -108,13 +109,13 @@ def test_in_memory_interpolation_is_the_streamed_one(monkeypatch: pytest.MonkeyP
     assert np.array_equal(v, whole.v_mm_s)
 
 
-@pytest.mark.parametrize("chunk", [interpolate_module.CHUNK_PERIODS, SMALL_CHUNK])
+@pytest.mark.parametrize("chunk", [stepping_module.CHUNK_PERIODS, SMALL_CHUNK])
 def test_stepping_with_the_landings_found_steps_the_same_points(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, chunk: int) -> None:
     """A plan stepped again with the landings of a first stepping (as the conversion does with
     those of `verified_plan`'s look at the points) gives the same chunks to the last bit,
     through every kind of landing, in one chunk a stretch or many."""
-    monkeypatch.setattr(interpolate_module, "CHUNK_PERIODS", chunk)
+    monkeypatch.setattr(stepping_module, "CHUNK_PERIODS", chunk)
     machine = load_machine("paper-table1")
     blocks = [item.in_mm() for item in json_items(many_period_program(tmp_path))
               if isinstance(item, CurveBlock)]
@@ -177,7 +178,7 @@ def test_memory_does_not_grow_with_the_duration_of_a_curve(
         monkeypatch: pytest.MonkeyPatch, trace: bool, chunk: int, feed_mm_s: float) -> None:
     """Ten times the periods, the same peak: chunks, not the curve, are held, in the program
     and in the trace. (Whole-curve arrays took ~90 bytes a period.)"""
-    monkeypatch.setattr(interpolate_module, "CHUNK_PERIODS", chunk)
+    monkeypatch.setattr(stepping_module, "CHUNK_PERIODS", chunk)
     peak_bytes(feed_mm_s, trace, monkeypatch)  # compile and cache outside the measurement
     short, short_periods = peak_bytes(feed_mm_s, trace, monkeypatch)
     long, long_periods = peak_bytes(feed_mm_s / 10.0, trace, monkeypatch)

@@ -1,8 +1,8 @@
 """Measurements of a plan or an interpolation, and the independent check of a converted program.
 
 - `common.time_optimal_bound_s`: a lower bound on any schedule's cycle time (used by `plan`).
-- `bound.jerk_limited_schedule`: a schedule keeping every limit, jerk included, found by its own
-  code (`plan --reference`, design §2c); imported on demand (scipy).
+- `bound.solve.jerk_limited_schedule`: a schedule keeping every limit, jerk included, found by
+  its own code (`plan --reference`, design §2c); imported on demand (scipy).
 - `compare.compare_file`: the paper's Table 2 on any input: per interpolator the feed fluctuation
   (design §3) and the compiled kernel's time per step.
 - `check.check_files`: verifies a converted program against its source without running the

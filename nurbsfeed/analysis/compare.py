@@ -12,13 +12,8 @@ from typing import Any
 import numpy as np
 
 from nurbsfeed.analysis.common import curve_blocks
-from nurbsfeed.interpolate import (
-    METHODS,
-    SLOW_SPEED_REL,
-    Interpolation,
-    interpolate,
-    step_spans,
-)
+from nurbsfeed.interpolate.kernels import METHODS, SLOW_SPEED_REL, step_spans
+from nurbsfeed.interpolate.stepping import Interpolation, interpolate
 from nurbsfeed.machine import Machine
 from nurbsfeed.pipeline import plan_block
 from nurbsfeed.planning.plan import Plan

@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from nurbsfeed.geometry import NurbsCurve
+from nurbsfeed.geometry.arclength import gauss_lengths
 from nurbsfeed.geometry.nurbs import curvature_from_derivatives
 
 CHORD_SAMPLES = 9
@@ -60,7 +61,7 @@ def chord_errors_mm(curve: NurbsCurve, u0: np.ndarray, u1: np.ndarray, a: np.nda
     return np.maximum(worst, np.maximum(f1, f2))
 
 
-GAUSS_X, GAUSS_W = np.polynomial.legendre.leggauss(5)
+GAUSS_POINTS = 5  # of each piece between the sorted parameters and the knots
 
 
 def arc_length_mm(curve: NurbsCurve, u: np.ndarray) -> np.ndarray:
@@ -70,10 +71,7 @@ def arc_length_mm(curve: NurbsCurve, u: np.ndarray) -> np.ndarray:
     no interval holds a knot, where |C'| may jump): exact to rounding on steps this short.
     """
     nodes = np.unique(np.concatenate([np.asarray(u, dtype=float), curve.span_breaks]))
-    half = 0.5 * np.diff(nodes)
-    mid = 0.5 * (nodes[:-1] + nodes[1:])
-    speed = curve.speed((mid[:, None] + half[:, None] * GAUSS_X[None, :]).ravel())
-    lengths = half * (speed.reshape(mid.size, GAUSS_X.size) @ GAUSS_W)
+    lengths = gauss_lengths(curve.speed, nodes[:-1], nodes[1:], GAUSS_POINTS)
     cumulative = np.concatenate([[0.0], np.cumsum(lengths)])
     return cumulative[np.searchsorted(nodes, u)] - cumulative[np.searchsorted(nodes,
                                                                               curve.u_min)]

@@ -10,10 +10,7 @@ import numpy as np
 from nurbsfeed.analysis.common import curve_blocks
 from nurbsfeed.analysis.geometry import chord_errors_mm, curvature_1_mm
 from nurbsfeed.errors import InputError, Location
-from nurbsfeed.interpolate import (
-    Interpolation,
-    interpolate,
-)
+from nurbsfeed.interpolate.stepping import Interpolation, interpolate
 from nurbsfeed.machine import Machine
 from nurbsfeed.pipeline import plan_block
 from nurbsfeed.planning.plan import Plan, feed_at

@@ -1,26 +1,42 @@
-"""Arc length by adaptive Simpson quadrature of |C'(u)| (paper Eq. 21, with the norms it omits).
+"""Arc length of a NURBS curve: every quadrature of |C'(u)| (paper Eq. 21, with the norms it
+omits) that nurbsfeed uses, each for what its callers need. |C'| comes from the span polynomials
+(geometry.kernel), one parameter at a time, or from the caller's vectorised evaluation.
 
-Each interval between consecutive nodes is integrated on its own, depth-first with an explicit
-stack of the right halves still to do: an interval [a, b] with Simpson value S(a, b) is split at
-its midpoint m, and accepted when |S(a, m) + S(m, b) - S(a, b)| <= 15 tol (the classic
-criterion; tol halves with each split) or at MAX_DEPTH; an accepted interval contributes
-S(a, m) + S(m, b) plus the Richardson term (S(a, m) + S(m, b) - S(a, b)) / 15.
-|C'| comes from the span polynomials (geometry.kernel), one parameter at a time.
+- `simpson_lengths` (compiled): the cumulative arc at the planning grid's nodes (planning.grid).
+  Adaptive Simpson, each interval between consecutive nodes on its own, depth-first with an
+  explicit stack of the right halves still to do: an interval [a, b] with Simpson value
+  S(a, b) is split at its midpoint m, and accepted when |S(a, m) + S(m, b) - S(a, b)| <= 15 tol
+  (the classic criterion; tol halves with each split) or at MAX_DEPTH; an accepted interval
+  contributes S(a, m) + S(m, b) plus the Richardson term (S(a, m) + S(m, b) - S(a, b)) / 15.
+- `arc_length` (compiled): the arc of one piece [a, b] to a tolerance, by adaptive 5-point
+  Gauss-Legendre, for the steps beside a zero of C' (interpolate.solved_steps).
+- `gauss_lengths` (numpy): the arcs of many pieces at once by a fixed Gauss-Legendre rule, for
+  pieces short enough and free of knots (the path model's u(s), planning.path_check; the check's
+  arc, analysis.geometry; the reference schedule's cells, analysis.bound.grid).
 """
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable
 
 import numpy as np
 
 from nurbsfeed.geometry.kernel import find_span, point_d1
 from nurbsfeed.jit import jit
 
-MAX_DEPTH = 40
+MAX_DEPTH = 40  # halvings of a node interval by `simpson_lengths`
 # Splits per node interval: MAX_DEPTH alone allows 2^40 of them where |C'| is rounding noise
 # (coincident control points), which never ends in practice; a smooth |C'| needs a few dozen.
 MAX_SPLITS = 1 << 16
+# Gauss-Legendre, 5 points on [-1, 1]: the arc of a piece of the curve (`arc_length`)
+GAUSS_X = (-0.906179845938664, -0.5384693101056831, 0.0, 0.5384693101056831, 0.906179845938664)
+GAUSS_W = (0.23692688505618928, 0.4786286704993663, 0.5688888888888887, 0.4786286704993663,
+           0.23692688505618928)
+ARC_MAX_DEPTH = 48  # halvings of a piece by `arc_length`: far below any step's rounding
+ARC_MAX_PIECES = 4096  # pieces `arc_length` splits at most
+EPS = float(np.finfo(float).eps)
 
 
 @jit
@@ -103,3 +119,98 @@ def simpson_lengths(knots, coef, degree, nodes, speed_at_nodes, tol_per_u):
             return cumulative
         cumulative[i + 1] = cumulative[i] + total
     return cumulative
+
+
+@jit
+def _gauss_arc(knots, coef, degree, n_ctrl, a, b, span):
+    """Integral of |C'| over [a, b] by 5-point Gauss-Legendre, and the span last used."""
+    half = 0.5 * (b - a)
+    mid = 0.5 * (a + b)
+    total = 0.0
+    for i in range(5):
+        x = mid + half * GAUSS_X[i]
+        span = find_span(knots, degree, n_ctrl, x, span)
+        _, _, _, dx, dy, dz = point_d1(knots, coef, degree, span, x)
+        total += GAUSS_W[i] * math.sqrt(dx * dx + dy * dy + dz * dz)
+    return half * total, span
+
+
+@jit
+def arc_length(knots, coef, degree, n_ctrl, a, b, tol, span):
+    """The arc length of C over [a, b] (a <= b) to about tol, by adaptive Gauss-Legendre: a
+    piece is halved until its halves add up to it within its share of tol and to no less than
+    its chord. |C'| has a kink where C' = 0 and a narrow dip where it nearly vanishes, which a
+    fixed rule misses; where the curve rests over most of [a, b] (coincident control points)
+    every node of the rule can fall on the rest, and only the chord shows the piece moved."""
+    if b <= a:  # a piece narrower than u's rounding
+        return 0.0
+    stack_a = np.empty(ARC_MAX_DEPTH + 2)
+    stack_b = np.empty(ARC_MAX_DEPTH + 2)
+    stack_q = np.empty(ARC_MAX_DEPTH + 2)
+    whole, span = _gauss_arc(knots, coef, degree, n_ctrl, a, b, span)
+    # positions carry rounding of EPS times their coordinates, and so does any arc from them:
+    # no piece is split for less (a step of 10 nm asks 1e-20 mm of tol)
+    span = find_span(knots, degree, n_ctrl, a, span)
+    ax, ay, az, _, _, _ = point_d1(knots, coef, degree, span, a)
+    floor = 8.0 * EPS * (abs(ax) + abs(ay) + abs(az))
+    stack_a[0] = a
+    stack_b[0] = b
+    stack_q[0] = whole
+    top = 1
+    total = 0.0
+    width = b - a
+    pieces = 0
+    while top > 0:
+        top -= 1
+        lo = stack_a[top]
+        hi = stack_b[top]
+        q = stack_q[top]
+        mid = 0.5 * (lo + hi)
+        left, span = _gauss_arc(knots, coef, degree, n_ctrl, lo, mid, span)
+        right, span = _gauss_arc(knots, coef, degree, n_ctrl, mid, hi, span)
+        span = find_span(knots, degree, n_ctrl, lo, span)
+        ax, ay, az, _, _, _ = point_d1(knots, coef, degree, span, lo)
+        span = find_span(knots, degree, n_ctrl, hi, span)
+        bx, by, bz, _, _, _ = point_d1(knots, coef, degree, span, hi)
+        chord = math.sqrt((bx - ax) ** 2 + (by - ay) ** 2 + (bz - az) ** 2)
+        # beside the tolerance, a floor of rounding (tol may lie below it) and a cap on the
+        # pieces: the work stays bounded however tight tol is
+        pieces += 1
+        slack = max(tol * (hi - lo) / width, 8.0 * EPS * abs(left + right), floor)
+        if ((abs(left + right - q) <= slack and left + right >= chord - slack)
+                or top >= ARC_MAX_DEPTH or pieces >= ARC_MAX_PIECES or mid <= lo or mid >= hi):
+            total += left + right
+            continue
+        # the right half first on the stack's top: the pieces are summed from a to b
+        stack_a[top] = mid
+        stack_b[top] = hi
+        stack_q[top] = right
+        stack_a[top + 1] = lo
+        stack_b[top + 1] = mid
+        stack_q[top + 1] = left
+        top += 2
+    return total
+
+
+@functools.cache
+def _gauss_rule(points: int) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss-Legendre nodes and weights on [-1, 1], (points,) each, read-only."""
+    x, w = np.polynomial.legendre.leggauss(points)
+    x.setflags(write=False)
+    w.setflags(write=False)
+    return x, w
+
+
+def gauss_lengths(speed: Callable[[np.ndarray], np.ndarray], u0: np.ndarray, u1: np.ndarray,
+                  points: int) -> np.ndarray:
+    """The arc from u0 to u1 (M,) each, by `points`-point Gauss-Legendre: (M,).
+
+    speed: |C'| at the quadrature nodes, (M * points,) -> (M * points,), piece by piece. Exact
+    to rounding on pieces that hold no knot (where |C'| may jump: the callers cut their pieces
+    at the knots, or evaluate each on its own span) and are short for the curve's bends.
+    """
+    x, w = _gauss_rule(points)
+    half = 0.5 * (u1 - u0)
+    mid = 0.5 * (u0 + u1)
+    at = (mid[:, None] + half[:, None] * x[None, :]).ravel()
+    return half * (speed(at).reshape(half.size, x.size) @ w)

@@ -13,7 +13,7 @@ functions at every parameter, which the stepping loop and the planning grid do m
 Two expansions, not one: |t| stays below half the span, and at every knot the value is the one
 A2.3 gives there, so a derivative that vanishes at a knot (a repeated control point, design §3a)
 comes out exactly 0, not as rounding noise. Outside [u_min, u_max] the end spans' polynomials
-extrapolate, which keeps the end-landing search of `interpolate` continuous.
+extrapolate, which keeps the end-landing search of `interpolate.landing` continuous.
 
 `eval_d1` evaluates C and C' from the basis functions directly (A2.2 carried to degree p-1,
 differentiated, then raised to degree p): the independent route that `analysis.check` verifies a

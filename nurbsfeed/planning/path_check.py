@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 
+from nurbsfeed.geometry.arclength import gauss_lengths
 from nurbsfeed.geometry.nurbs import NurbsCurve
 from nurbsfeed.planning.grid import ZERO_SPEED_REL, Grid
 from nurbsfeed.planning.limits import Limits
@@ -115,8 +116,7 @@ def path_limit(curve: NurbsCurve, grid: Grid, lim: Limits, raw_limit: np.ndarray
 
 PATH_SAMPLES_PER_PERIOD = 2  # the path model's final check samples the law this densely
 PATH_CHUNK = 1 << 16  # samples per chunk of that check: memory stays bounded on long curves
-# 8-point Gauss-Legendre nodes and weights on [-1, 1], for the arc length inside one grid interval
-_GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
+ARC_GAUSS_POINTS = 8  # of the arc length inside one grid interval
 UNEVEN_SPEED = 1.5  # |C'| changing by more than this across a grid interval: u(s) is not linear
 ARC_BISECTIONS = 60
 
@@ -140,10 +140,7 @@ def arc_parameters(curve: NurbsCurve, grid: Grid, s_mm: np.ndarray) -> np.ndarra
     start = grid.u[first]
     for _ in range(ARC_BISECTIONS):
         mid = 0.5 * (lo + hi)
-        half = 0.5 * (mid - start)
-        centre = 0.5 * (mid + start)
-        points = (centre[:, None] + half[:, None] * _GL_X[None, :]).ravel()
-        arc = half * (curve.speed(points).reshape(mid.size, _GL_X.size) @ _GL_W)
+        arc = gauss_lengths(curve.speed, start, mid, ARC_GAUSS_POINTS)
         below = arc < target
         lo = np.where(below, mid, lo)
         hi = np.where(below, hi, mid)

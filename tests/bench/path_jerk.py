@@ -30,7 +30,7 @@ import numpy as np
 
 from nurbsfeed.analysis.common import curve_blocks
 from nurbsfeed.geometry import NurbsCurve
-from nurbsfeed.interpolate import interpolate
+from nurbsfeed.interpolate.stepping import interpolate
 from nurbsfeed.machine import Machine, load_machine
 from nurbsfeed.pipeline import plan_block
 from nurbsfeed.planning.plan import Plan

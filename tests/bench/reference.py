@@ -33,7 +33,7 @@ import time
 
 import numpy as np
 
-from nurbsfeed.analysis.bound import jerk_limited_schedule
+from nurbsfeed.analysis.bound.solve import jerk_limited_schedule
 from nurbsfeed.analysis.common import curve_blocks, time_optimal_bound_s
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.machine import Machine, load_machine

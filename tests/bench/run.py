@@ -20,8 +20,8 @@
 4. Cold start: `nurbsfeed convert` of a small sample with a warm numba cache (median of 5).
 5. Phases: per curve of the samples and the butterfly under the default profile, in one
    process with a warm cache, the time to plan (`pipeline.plan_block`, the envelope's check of
-   its points included), to step (`interpolate.Stepping`) and to write (`MoveWriter`), side by
-   side, median of PHASE_RUNS.
+   its points included), to step (`interpolate.stepping.Stepping`) and to write (`MoveWriter`),
+   side by side, median of PHASE_RUNS.
 Speed is measured here, never asserted in the test suite.
 """
 
@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from nurbsfeed.interpolate import METHODS, SLOW_SPEED_REL, step_spans
+from nurbsfeed.interpolate.kernels import METHODS, SLOW_SPEED_REL, step_spans
 from nurbsfeed.machine import load_machine
 from nurbsfeed.planning.planner import plan_curve
 from nurbsfeed.readers.json_curves import read_json_curves
@@ -111,7 +111,7 @@ def phases() -> list[tuple[str, int, float, float, float]]:
     seconds to plan, to step and to write it."""
     from nurbsfeed.analysis.common import curve_blocks
     from nurbsfeed.gcode.writer import MoveWriter
-    from nurbsfeed.interpolate import Stepping
+    from nurbsfeed.interpolate.stepping import Stepping
     from nurbsfeed.pipeline import plan_block
 
     machine = load_machine("default")

@@ -21,7 +21,12 @@ from nurbsfeed.analysis.check.projection import (
     project_points_and_others,
 )
 from nurbsfeed.analysis.check.report import Estimation, Findings
-from nurbsfeed.analysis.geometry import arc_length_mm, chord_errors_mm, curvature_1_mm
+from nurbsfeed.analysis.geometry import (
+    arc_length_mm,
+    chord_errors_mm,
+    curvature_1_mm,
+    curve_length_mm,
+)
 from nurbsfeed.gcode.writer import round_ticks, written_decimals
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.machine import FLOOR_MARGIN, Machine
@@ -202,7 +207,7 @@ def check_section(section: Section, block: CurveBlock, machine: Machine,
                      f"the comment announces a {section.period_ms:g} ms period, the machine "
                      f"profile has {period * 1e3:g} ms: check with the profile used to convert")
     if section.zero_length or not section.moves:
-        length = float(arc_length_mm(curve, np.array([curve.u_max]))[0])
+        length = curve_length_mm(curve)
         if length > r:
             findings.add("no-moves", section.comment_line,
                          f"no move written but the curve is {length:.4g} mm long")
