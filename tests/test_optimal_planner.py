@@ -18,16 +18,16 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.optimize import linprog
 
-from nurbsfeed.analysis.bound import jerk_limited_schedule
+from nurbsfeed.analysis.bound.solve import jerk_limited_schedule
 from nurbsfeed.analysis.check import check_files
 from nurbsfeed.analysis.common import curve_blocks
 from nurbsfeed.geometry import NurbsCurve
-from nurbsfeed.interpolate import interpolate
+from nurbsfeed.interpolate.stepping import interpolate
 from nurbsfeed.machine import load_machine
 from nurbsfeed.pipeline import convert_file, plan_block, verified_plan
 from nurbsfeed.planning import rows as rows_module
 from nurbsfeed.planning.banded_lp import solve_lp
-from nurbsfeed.planning.cells import G_CAP, G_D, point_weights
+from nurbsfeed.planning.basis import G_CAP, G_D, point_weights
 from nurbsfeed.planning.planner import plan_curve
 from nurbsfeed.planning.rows import ROWS_PER_POINT, all_rows, point_ratio
 from nurbsfeed.safety import slowdown_from_points

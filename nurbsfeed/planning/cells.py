@@ -38,16 +38,12 @@ import numpy as np
 
 from nurbsfeed.geometry.nurbs import NurbsCurve
 from nurbsfeed.jit import jit
+from nurbsfeed.planning.basis import BETWEEN, G_CAP, G_D, G_K, G_KAPPA, G_KS, G_SIZE, G_T
 from nurbsfeed.planning.grid import Grid
 from nurbsfeed.planning.limits import Limits, speed_limit
 from nurbsfeed.planning.path_check import arc_parameters
 from nurbsfeed.planning.path_model import frames, kappa_n_jumps
-
-# the geometry of one point, as the rows read it (`Layout.geo`, (Q, 3, G_SIZE))
-G_KAPPA, G_T, G_K, G_KS, G_D, G_CAP = 0, 1, 4, 7, 10, 13
-G_SIZE = 14
-POINTS = (0.0, 0.5, 1.0)  # where a cell's limits are read: its start, middle and end
-BETWEEN = (0.25, 0.75)  # ... and checked once planned (`cut_cells`)
+from nurbsfeed.planning.rows import point_ratio
 
 CELL_PERIODS = 4.0  # a cell lasting longer at the speed estimate is cut
 RECUT_SLACK = 2.0  # ... and one the schedule spends over this many times as long in, again
@@ -376,7 +372,6 @@ def rest_caps(curve: NurbsCurve, grid: Grid, lim: Limits, s_mm: np.ndarray, rest
     """Per stretch (S, 2): the greatest far value b_far of each rest cell at which every limit
     holds at REST_POINTS of it (b = b_far y^(4/3), b' = 4/3 b_far y^(1/3) / h, b'' = 4/9 b_far
     y^(-2/3) / h^2 towards the rest; found by bisection: every quantity grows with b_far)."""
-    from nurbsfeed.planning.rows import point_ratio
 
     out = np.empty((rests.size - 1, 2))
     ys = np.array(REST_POINTS)
@@ -392,7 +387,8 @@ def rest_caps(curve: NurbsCurve, grid: Grid, lim: Limits, s_mm: np.ndarray, rest
             geo = point_geometry(curve, lim, uu, feed_at_u(uu), np.full(uu.size, -1))
             best = lim.feed_mm_s**2
             for g, y in zip(geo, ys):
-                b, d, dd = y ** (4 / 3), sign * 4 / 3 * y ** (1 / 3) / h, 4 / 9 * y ** (-2 / 3) / h**2
+                b = y ** (4 / 3)
+                d, dd = sign * 4 / 3 * y ** (1 / 3) / h, 4 / 9 * y ** (-2 / 3) / h**2
                 best = min(best, _largest_scale(g, b, d, dd, lim, *lim_arrays, best))
             out[s, side] = best
     return out
@@ -402,7 +398,6 @@ def _largest_scale(g: np.ndarray, b: float, d: float, dd: float, lim: Limits,
                    acc_x: np.ndarray, vel_x: np.ndarray, jerk_x: np.ndarray,
                    top: float) -> float:
     """The greatest x <= top with (x b, x b', x b'') within every limit at geometry g."""
-    from nurbsfeed.planning.rows import point_ratio
 
     def ok(x: float) -> bool:
         return point_ratio(g, x * b, x * d, x * dd, lim.jerk_mm_s3, lim.acc_mm_s2,
@@ -418,18 +413,3 @@ def _largest_scale(g: np.ndarray, b: float, d: float, dd: float, lim: Limits,
         else:
             high = mid
     return low
-
-
-@jit
-def point_weights(g0, g1, w0, h, x, out):
-    """The weights (3, 3) of an inner cell's three coefficients in b (row 0), b' (row 1) and
-    b'' (row 2) at share x of the cell (module docstring)."""
-    xs = x * h
-    for j in range(3):
-        s0 = -1.0 / g0 if j == 0 else (1.0 / g0 if j == 1 else 0.0)
-        s1 = 0.0 if j == 0 else (-1.0 / g1 if j == 1 else 1.0 / g1)
-        dd = (s1 - s0) / h
-        b0 = w0 if j == 0 else (1.0 - w0 if j == 1 else 0.0)
-        out[0, j] = b0 + s0 * xs + 0.5 * dd * xs * xs
-        out[1, j] = s0 + dd * xs
-        out[2, j] = dd

@@ -21,8 +21,9 @@ coefficients (cells.point_weights), so every limit is a row over three consecuti
 
 J / sqrt(b) is convex in b, so its tangent at the linearization point b0 lies below it:
 J (3/2 - b / (2 b0)) / sqrt(b0) <= J / sqrt(b), and a row |L| <= that tangent keeps the true
-limit for every b (a convex-concave step); a jump's -sqrt(b) |D| / T is convex too. The rows are exact at b0; the linear programs
-(planning.schedule) move b0 to their solution and solve again.
+limit for every b (a convex-concave step); a jump's -sqrt(b) |D| / T is convex too. The rows
+are exact at b0; the linear programs (planning.schedule) move b0 to their solution and solve
+again.
 
 `point_ratio` measures the true quantities at one point (sqrt(b) exact): the slowdown lambda
 (v / lambda, a / lambda^2, jerk / lambda^3) that brings every one within its limit.
@@ -35,7 +36,7 @@ import math
 import numpy as np
 
 from nurbsfeed.jit import jit
-from nurbsfeed.planning.cells import G_CAP, G_D, G_K, G_KAPPA, G_KS, G_T, point_weights
+from nurbsfeed.planning.basis import G_CAP, G_D, G_K, G_KAPPA, G_KS, G_T, point_weights
 
 NORMAL_SIDES = 16  # the polygon inscribed in the circle |jerk across T| <= J_n (3-D)
 PLANAR_REL = 1e-9  # K_s's part along B below this share of |K_s|: none
@@ -80,7 +81,7 @@ def _normal_axes(g):
 def _same_point(g, h):
     """Whether two geometry rows are one point's (a cell's end and the next one's start away
     from a knot, read at the same parameter)."""
-    for i in range(g.size):
+    for i in range(g.size):  # noqa: SIM110 - a generator is not compiled
         if g[i] != h[i]:
             return False
     return True

@@ -11,9 +11,11 @@ three consecutive coefficients) and solved by planning.banded_lp in O(rows) an i
 
 Only the rows that are near binding go into a program after the first: those whose left side
 reaches KEEP_SHARE of their bound at the linearisation point (the last solution); after a solve
-every row is evaluated at the solution, and the program is solved again with those it breaks (a
-cutting plane), at most CUT_ROUNDS times. What the last program's solution still breaks (nothing, or rounding) is
-taken back by a uniform slowdown (`Schedule.slowdown`): every limit scales with a power of it.
+every row is evaluated at the solution, and the program is solved again with those it breaks
+and their neighbours' (a cutting plane), at most CUT_ROUNDS times. What the last schedule still
+breaks at the cells' points (nothing, or rounding) is taken back by a uniform slowdown
+(`Schedule.slowdown`): every limit scales with a power of it; where it breaks a limit between
+them, path_plan cuts those cells and plans again.
 """
 
 from __future__ import annotations
@@ -25,8 +27,18 @@ import numpy as np
 
 from nurbsfeed.jit import jit
 from nurbsfeed.planning.banded_lp import solve_lp
-from nurbsfeed.planning.cells import (BETWEEN, G_CAP, G_D, G_K, G_KAPPA, G_KS, G_T, POINTS,
-                                     Layout, point_weights)
+from nurbsfeed.planning.basis import (
+    BETWEEN,
+    G_CAP,
+    G_D,
+    G_K,
+    G_KAPPA,
+    G_KS,
+    G_T,
+    POINTS,
+    point_weights,
+)
+from nurbsfeed.planning.cells import Layout
 from nurbsfeed.planning.limits import Limits
 from nurbsfeed.planning.rows import ROWS_PER_POINT, all_rows, cell_ratios
 
@@ -36,9 +48,6 @@ MAX_PROGRAMS = 8
 CONVERGED_REL = 1e-2
 KEEP_SHARE = 0.5  # a row whose left side is at least this share of its bound joins a program
 CUT_ROUNDS = 8
-DEBUG = []
-DUMP = None
-HIST = np.full((100, 5), np.nan)
 # a row broken by more than this share of its bound is cut in (beyond the solver's tolerance,
 # banded_lp.TOL_FEAS, and the rounding of its terms)
 BROKEN_REL = 1e-6
@@ -199,7 +208,7 @@ def plan_schedule(layout: Layout, lim: Limits, start: np.ndarray | None = None) 
     idx, val, rhs = np.empty(size, dtype=np.int64), np.empty((size, 3)), np.empty(size)
     times = np.empty(q_n + 2 * layout.first.size)
     weights = np.empty(n)
-    hist = HIST
+    hist = np.empty((0, 5))  # (the solver's iteration record: not kept)
     c = start.copy()
     best_c, best_t = None, math.inf
     programs = 0
@@ -226,8 +235,6 @@ def plan_schedule(layout: Layout, lim: Limits, start: np.ndarray | None = None) 
         broken = np.zeros(r, dtype=bool)
         for _ in range(CUT_ROUNDS + 1):
             sel = np.flatnonzero(keep)
-            if DUMP is not None:
-                DUMP.append((n, ri[sel].copy(), rv[sel].copy(), rr[sel].copy(), objective.copy(), upper.copy(), x_lin.copy()))
             x, status = solve_lp(n, ri[sel], rv[sel], rr[sel], objective, upper, scale, x_lin,
                                  hist)
             if status != 0:
@@ -244,7 +251,6 @@ def plan_schedule(layout: Layout, lim: Limits, start: np.ndarray | None = None) 
             for shift in range(-CUT_REACH, CUT_REACH + 1):
                 near[np.clip(ri[broken] + shift, 0, n + 2)] = True
             keep |= near[ri]
-        DEBUG.append((programs, status, int(keep.sum()), r, int(broken.sum())))
         if status != 0 or broken.any():
             break  # (the last schedule stands: it keeps every row)
         _join_rests(layout, x)

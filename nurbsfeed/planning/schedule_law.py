@@ -178,5 +178,6 @@ def schedule_law(schedule: Schedule, period_s: float, extra_slowdown: float = 1.
         key_t.append(start + n * period_s)
         q0 = q1 + 1
     key = np.array(key_t)
-    law = TimeLaw.from_pieces(*(np.concatenate(p) for p in parts), key, float(key[-1]))
+    t0, s0, v0, a0, jerk = (np.concatenate(p) for p in parts)
+    law = TimeLaw.from_pieces(t0, s0, v0, a0, jerk, key, float(key[-1]))
     return law, key
