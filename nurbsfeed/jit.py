@@ -47,7 +47,7 @@ def _numba_njit() -> Callable[[F], F] | None:
 
 
 def _import_numba() -> ModuleType:
-    """numba, imported with scipy hidden from it. Where scipy is installed (the test and optimal
+    """numba, imported with scipy hidden from it. Where scipy is installed (the test and reference
     extras install it) numba imports it on its own twice: to check its version, and in
     numba.np.arraymath (imported when the first kernel loads) to probe for BLAS, which imports
     scipy.linalg; 0.27 s of the 0.6 s a small conversion takes. The probe decides one thing,
@@ -55,8 +55,8 @@ def _import_numba() -> ModuleType:
     kernel here uses either; np.dot and np.linalg look for scipy themselves when they compile.
     So both imports happen while sys.modules holds None for scipy, which makes `import scipy`
     raise ImportError (the import system's rule for a None entry), and the entry goes again
-    after them: scipy imports as usual for whoever needs it later (planner: optimal,
-    plan --reference). If scipy is already imported there is nothing to save."""
+    after them: scipy imports as usual for whoever needs it later (plan --reference,
+    the tests). If scipy is already imported there is nothing to save."""
     if "scipy" in sys.modules:
         import numba
 

@@ -114,3 +114,22 @@ def test_the_reference_keeps_every_limit_measured_from_its_positions(model: str)
         assert np.abs(ref.j_mm_s3).max() <= (1.0 + 1e-6) * lim.jerk_mm_s3
     # and it is no toy: the motion reaches a limit somewhere (within 5 % of one)
     assert max(ref.ratios.values()) >= 0.95
+
+
+def test_the_reference_passes_a_knot_where_kappa_jumps_within_the_jerk_limits() -> None:
+    """samples/fanuc-quadratic.nc: a quadratic whose curvature vector jumps at its knot. Read
+    one period apart, the jump is a jerk v^2 |D| / T; the reference left it out and passed the
+    knot 5 % faster than any schedule keeping the limits from positions could (the path
+    planner's plan was 1.050 x the reference under paper-table1's limits). Its positions keep
+    every jerk limit across the knot now."""
+    from nurbsfeed.analysis.common import curve_blocks
+    from nurbsfeed.machine import load_machine
+    from tests.conftest import SAMPLES
+
+    [block] = curve_blocks(SAMPLES / "fanuc-quadratic.nc")
+    lim = load_machine("paper-table1", {"jerk_model": "path", "planner": "optimal"}).limits
+    ref = jerk_limited_schedule(block.curve, lim, block.feed_u, block.feed_mm_s)
+    pts = ref.points_at(lim.period_s * np.arange(int(ref.cycle_s / lim.period_s) + 1))
+    got = path_motion(pts, lim.period_s)
+    assert got.normal_jerk_mm_s3.max() <= 1.02 * lim.normal_jerk_mm_s3
+    assert np.abs(got.tangential_jerk_mm_s3).max() <= 1.02 * lim.jerk_mm_s3

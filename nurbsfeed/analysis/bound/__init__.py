@@ -21,7 +21,9 @@ Constraint models (`Limits.jerk_model`):
   |a| <= A_t, |j| <= J_t (j the time law's jerk).
 - "path", what the machine feels: the same speed caps without the cbrt(J_n / kappa^2) proxy,
   |a| <= A_t, kappa v^2 <= A_n, |jerk . T| <= J_t, |jerk across T| <= J_n, and per axis
-  |velocity_x| <= V_x, |acceleration_x| <= A_x, |jerk_x| <= J_x where given.
+  |velocity_x| <= V_x, |acceleration_x| <= A_x, |jerk_x| <= J_x where given. At a knot where
+  kappa N jumps by D the acceleration jumps by v^2 D, which positions one period apart read
+  as a jerk v^2 |D| / T: it adds to the normal jerk and to each axis's (|D_x|) there.
 
 The schedule is a C1 piecewise quadratic b(s) on a grid of nodes (variables: b and its slope
 b' at each node; on each cell b'' is constant), so a = b'/2 is continuous and j is bounded: the

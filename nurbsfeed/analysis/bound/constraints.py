@@ -33,6 +33,9 @@ class Points:
     b: np.ndarray  # (P, 3)
     d: np.ndarray  # (P, 3)
     dd: np.ndarray  # (P, 3)
+    # (P, 3) the jump of kappa N at a point on a knot where it jumps (0 elsewhere): read over
+    # one period by the machine's positions it is a jerk b |D| / T
+    jump: np.ndarray
 
     def value(self, coef: np.ndarray, x: np.ndarray) -> np.ndarray:
         return np.einsum("pk,pk->p", coef, x[self.cols])
@@ -96,6 +99,11 @@ def constraint_points(grid: Grid, lim: Limits, feed_u: np.ndarray,
         _feed_at(grid.mid_u, feed_u, feed_mm_s),
         np.minimum(_feed_at(grid.u[1:], feed_u, feed_mm_s),
                    _feed_at(np.nextafter(grid.u[1:], -np.inf), feed_u, feed_mm_s))[sel[2][0]]])
+    # the jump of K = kappa N at each node: its value on its own span less the cell's before
+    node_jump = grid.node.curvature_vector - grid.node_left.curvature_vector
+    node_jump[grid.rest] = 0.0  # (b = 0 there)
+    jump = np.concatenate([node_jump[cells[sel[0][0]]], np.zeros((m - 1, 3)),
+                           node_jump[cells[sel[2][0]] + 1]])
     hc = h[cell]
     x = sigma / hc
     n = cell.size
@@ -112,16 +120,18 @@ def constraint_points(grid: Grid, lim: Limits, feed_u: np.ndarray,
         b[rest_side] = np.stack([yr ** (4 / 3), zero, zero], axis=1)
         d[rest_side] = np.stack([sign * 4 / 3 * yr ** (1 / 3) / hr, zero, zero], axis=1)
         dd[rest_side] = np.stack([4 / 9 * yr ** (-2 / 3) / hr**2, zero, zero], axis=1)
-    return Points(cell, sigma, geo, speed_cap(lim, geo, feed), cols, b, d, dd)
+    return Points(cell, sigma, geo, speed_cap(lim, geo, feed), cols, b, d, dd, jump)
 
 
 # ---- constraint families ------------------------------------------------------------------------
 
 @dataclass(frozen=True)
 class Family:
-    """Rows coef_b b + coef_d b' + coef_dd b'' (times sqrt(b) when `jerk`) <= limit, one per
-    constraint point (P,); `power` is how the family scales with time (1 speed, 2 acceleration,
-    3 jerk: lambda = ratio ^ (1 / power))."""
+    """Rows coef_b b + coef_d b' + coef_dd b'' (times sqrt(b) for a jerk, power 3) + jump b
+    <= limit, one per constraint point (P,); `power` is how the family scales with time (1
+    speed, 2 acceleration, 3 jerk: lambda = ratio ^ (1 / power)). `jump` (P,) is the jerk a
+    jump of kappa N adds per unit of b, |D| / T: it scales as an acceleration does (the period
+    does not stretch), so where it is not 0 a jerk's lambda is the ratio's square root."""
 
     name: str
     coef_b: np.ndarray
@@ -129,6 +139,7 @@ class Family:
     coef_dd: np.ndarray
     limit: float
     power: int
+    jump: np.ndarray | None = None
 
 
 def _normal_basis(geo: Geometry) -> tuple[np.ndarray, np.ndarray, bool]:
@@ -151,9 +162,10 @@ def _normal_basis(geo: Geometry) -> tuple[np.ndarray, np.ndarray, bool]:
     return e1, np.cross(t, e1), planar
 
 
-def families(lim: Limits, geo: Geometry) -> tuple[list[Family], Family | None]:
+def families(lim: Limits, geo: Geometry, jump: np.ndarray) -> tuple[list[Family], Family | None]:
     """The linear and linearised rows of the model; and for the path model, the normal jerk
-    family whose exact value is a norm (checked exactly, imposed as a polygon)."""
+    family whose exact value is a norm (checked exactly, imposed as a polygon). jump (P, 3):
+    the jump of kappa N at each point (`Points.jump`)."""
     zero = np.zeros(geo.u.size)
     one = np.ones(geo.u.size)
     out: list[Family] = []
@@ -170,7 +182,9 @@ def families(lim: Limits, geo: Geometry) -> tuple[list[Family], Family | None]:
                               lim.axis_acc_mm_s2[axis], 2))
         if math.isfinite(lim.axis_jerk_mm_s3[axis]):
             out.append(Family(f"jerk {'XYZ'[axis]}", ksx, 1.5 * kx, 0.5 * tx,
-                              lim.axis_jerk_mm_s3[axis], 3))
+                              lim.axis_jerk_mm_s3[axis], 3,
+                              np.abs(jump[:, axis]) / lim.period_s))
+    normal_jump = np.linalg.norm(jump, axis=1) / lim.period_s
     e1, e2, planar = _normal_basis(geo)
     dirs = [0.0, math.pi] if planar else list(
         np.linspace(0, 2 * math.pi, NORMAL_DIRECTIONS, endpoint=False))
@@ -179,8 +193,8 @@ def families(lim: Limits, geo: Geometry) -> tuple[list[Family], Family | None]:
         e = math.cos(theta) * e1 + math.sin(theta) * e2
         out.append(Family("normal jerk polygon", np.einsum("ij,ij->i", ks, e),
                           1.5 * np.einsum("ij,ij->i", geo.curvature_vector, e), zero,
-                          lim.normal_jerk_mm_s3, 3))
-    return out, Family("normal jerk", zero, zero, zero, lim.normal_jerk_mm_s3, 3)
+                          lim.normal_jerk_mm_s3, 3, normal_jump))
+    return out, Family("normal jerk", zero, zero, zero, lim.normal_jerk_mm_s3, 3, normal_jump)
 
 
 def _normal_jerk(pts: Points, x: np.ndarray) -> np.ndarray:
@@ -207,14 +221,23 @@ def worst_ratios(pts: Points, lim: Limits, fams: list[Family], normal: Family | 
     for fam in fams:
         if fam.name == "normal jerk polygon":
             continue
-        val = (fam.coef_b * b + fam.coef_d * pts.value(pts.d, x)
-               + fam.coef_dd * pts.value(pts.dd, x))
+        val = np.abs(fam.coef_b * b + fam.coef_d * pts.value(pts.d, x)
+                     + fam.coef_dd * pts.value(pts.dd, x))
         if fam.power == 3:
             val = val * root
-        out[fam.name] = max(out.get(fam.name, 0.0),
-                            float((np.abs(val).max() / fam.limit) ** (1 / fam.power)))
+        out[fam.name] = max(out.get(fam.name, 0.0), _share(val, b, fam))
     if normal is not None:
-        out[normal.name] = float(((root * _normal_jerk(pts, x)).max() / normal.limit)
-                                 ** (1 / 3))
+        out[normal.name] = _share(root * _normal_jerk(pts, x), b, normal)
     return out
+
+
+def _share(value: np.ndarray, b: np.ndarray, fam: Family) -> float:
+    """The lambda that brings value (P,) (with the family's jump term added) within its
+    limit."""
+    if fam.jump is None or not fam.jump.any():
+        return float((value.max() / fam.limit) ** (1 / fam.power))
+    ratio = (value + b * fam.jump) / fam.limit
+    jumped = fam.jump > 0.0
+    return float(max(np.max(ratio[~jumped], initial=0.0) ** (1 / fam.power),
+                     np.max(ratio[jumped], initial=0.0) ** 0.5))
 

@@ -51,7 +51,7 @@ def jerk_limited_schedule(curve: NurbsCurve, limits: Limits,
     feed_mm_s = np.empty(0) if feed_mm_s is None else np.asarray(feed_mm_s, dtype=float)
     grid = build_grid(curve, limits, feed_u)
     pts = constraint_points(grid, limits, feed_u, feed_mm_s)
-    fams, normal = families(limits, pts.geo)
+    fams, normal = families(limits, pts.geo, pts.jump)
     m = grid.u.size
     h = np.diff(grid.s_mm)
     rest_left, rest_right = grid.rest[:-1], grid.rest[1:]
@@ -111,7 +111,8 @@ def jerk_limited_schedule(curve: NurbsCurve, limits: Limits,
                 fixed_rows.append(rows_of(coef, sign * np.ones(n_pts)))
                 fixed_rhs.append(np.full(n_pts, fam.limit))
             else:
-                jerk_coefs.append((sign * coef, fam.limit))
+                jump = np.zeros(n_pts) if fam.jump is None else fam.jump
+                jerk_coefs.append((sign * coef, fam.limit, jump))
 
     def solve(slowness: np.ndarray, a_ub: sp.csr_matrix, b_ub: np.ndarray, high: np.ndarray
               ) -> tuple[np.ndarray, float, float]:
@@ -138,8 +139,11 @@ def jerk_limited_schedule(curve: NurbsCurve, limits: Limits,
         iterations += 1
         b_lin = np.maximum(x_lin[:m], floor_b)
         root = np.sqrt(np.maximum(pts.value(pts.b, x_lin), 0.0))
-        a_ub = sp.vstack(fixed_rows + [rows_of(coef, root) for coef, _ in jerk_coefs]).tocsr()
-        b_ub = np.concatenate(fixed_rhs + [np.full(n_pts, lim) for _, lim in jerk_coefs])
+        # (a jump's b |D| / T is linear in b as it is)
+        a_ub = sp.vstack(fixed_rows + [rows_of(coef * root[:, None] + jump[:, None] * pts.b,
+                                               np.ones(n_pts))
+                                       for coef, _, jump in jerk_coefs]).tocsr()
+        b_ub = np.concatenate(fixed_rhs + [np.full(n_pts, lim) for _, lim, _ in jerk_coefs])
         # the cycle time sum w / sqrt(b), linearised: a node where b is small weighs in as
         # much as the time it costs
         slowness = weight / b_lin**1.5
@@ -169,11 +173,19 @@ def jerk_limited_schedule(curve: NurbsCurve, limits: Limits,
         iterations += 1
         lin_nodes = np.maximum(x[:m], floor_b)
         lin_points = np.maximum(pts.value(pts.b, x), floor_b)
-        slope = 0.5 / (lin_points * np.sqrt(lin_points))
-        a_ub = sp.vstack(fixed_rows + [rows_of(coef + (lim * slope)[:, None] * pts.b,
-                                               np.ones(n_pts)) for coef, lim in jerk_coefs])
-        b_ub = np.concatenate(fixed_rhs + [1.5 * lim / np.sqrt(lin_points)
-                                           for _, lim in jerk_coefs])
+        rows, bounds = [], []
+        for coef, lim, jump in jerk_coefs:
+            # L <= J / sqrt(b) - jump sqrt(b), convex in b: its tangent, where a jump is, at b
+            # or at the jump's own limit J / jump, the lower (beyond it the tangent cuts 0)
+            with np.errstate(divide="ignore"):
+                at = np.where(jump > 0.0, np.minimum(lin_points, lim / np.where(
+                    jump > 0.0, jump, 1.0)), lin_points)
+            root_at = np.sqrt(at)
+            slope = 0.5 * lim / (at * root_at) + 0.5 * jump / root_at
+            rows.append(rows_of(coef + slope[:, None] * pts.b, np.ones(n_pts)))
+            bounds.append(1.5 * lim / root_at - 0.5 * jump * root_at)
+        a_ub = sp.vstack(fixed_rows + rows)
+        b_ub = np.concatenate(fixed_rhs + bounds)
         x, lam, scaled = solve(weight / lin_nodes**1.5, a_ub.tocsr(), b_ub, node_cap**2)
         if scaled < best_scaled:
             gain = best_scaled - scaled
