@@ -20,7 +20,9 @@ from nurbsfeed.planning.limits import Limits
 
 MAX_ITERATIONS = 40  # of the first phase
 CONVERGED_REL = 2e-5  # a convex-concave step gaining less than this (relative): converged
-LP_METHOD = "highs"
+# HiGHS's choice first; where it ends in an unknown status (the figure-eight under the default
+# profile: "model_status is Unknown"), its interior point, then its dual simplex
+LP_METHODS = ("highs", "highs-ipm", "highs-ds")
 TRUST_START, TRUST_SWITCH, TRUST_MAX = 0.5, 0.2, 4.0
 MAX_TANGENT_ITERATIONS = 4  # how far b may grow, relative to itself
 START_SHARE = 0.25  # of the acceleration-limited b: the first linearisation point
@@ -121,9 +123,12 @@ def jerk_limited_schedule(curve: NurbsCurve, limits: Limits,
         objective = -np.concatenate([slowness / slowness.sum(), np.zeros(m)])
         bounds = np.concatenate([np.stack([np.zeros(m), high], axis=1),
                                  np.stack([-d_cap, d_cap], axis=1)])
-        res = linprog(objective, A_ub=a_ub, b_ub=b_ub, A_eq=a_eq, b_eq=b_eq, bounds=bounds,
-                      method=LP_METHOD)
-        if res.status != 0:
+        for method in LP_METHODS:
+            res = linprog(objective, A_ub=a_ub, b_ub=b_ub, A_eq=a_eq, b_eq=b_eq, bounds=bounds,
+                          method=method)
+            if res.status == 0:
+                break
+        else:
             raise RuntimeError(f"the reference schedule's linear program failed: {res.message}")
         lam = max(1.0, max(worst_ratios(pts, limits, fams, normal, res.x).values()))
         return res.x, lam, lam * _cycle(res.x, h, m, rest_left, rest_right)
