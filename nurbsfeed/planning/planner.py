@@ -80,17 +80,23 @@ def _schedule_plan(curve: NurbsCurve, lim: Limits, grid: Grid, kappa0: float, n_
                    schedule: PathSchedule, acc: float, jerk: float) -> Plan:
     """A path schedule as a plan: its rests are the keys, one stretch between each two, whole
     periods each."""
+    law = schedule.law
+    key_t = law.key_t_s
     rest_nodes = schedule.rest_nodes
-    zeros = np.zeros(rest_nodes.size)
-    key_t = schedule.law.key_t_s
+    kinds = np.asarray(schedule.kinds, dtype=np.int64)
+    piece_key = np.arange(rest_nodes.size)
     periods = np.rint(np.diff(key_t) / lim.period_s).astype(np.int64)
-    peaks = np.array([float(schedule.law.v0_mm_s[(schedule.law.t0_s >= key_t[k])
-                                                  & (schedule.law.t0_s < key_t[k + 1])]
+    scale = np.ones(periods.size)
+    peaks = np.array([float(law.v0_mm_s[(law.t0_s >= key_t[k]) & (law.t0_s < key_t[k + 1])]
                             .max(initial=0.0)) for k in range(rest_nodes.size - 1)])
-    arrays = (rest_nodes, np.asarray(schedule.kinds, dtype=np.int64), zeros, zeros.copy(), peaks,
-              np.zeros(peaks.size), np.zeros(peaks.size), np.arange(rest_nodes.size), periods,
-              np.ones(periods.size))
-    for arr in arrays:
+    zeros = np.zeros(rest_nodes.size)
+    seg_zeros = np.zeros(peaks.size)
+    for arr in (rest_nodes, kinds, piece_key, periods, scale, peaks, zeros, seg_zeros):
         arr.setflags(write=False)
-    return Plan(curve, lim, grid, kappa0, n_peaks, *arrays[:7], schedule.law, schedule.slowdown,
-                *arrays[7:], schedule.rounds, acc, jerk, lim.planner)
+    return Plan(curve=curve, limits=lim, grid=grid, kappa0_1_mm=kappa0,
+                n_peaks_above_threshold=n_peaks, key_node=rest_nodes, key_kind=kinds,
+                key_nominal_mm_s=zeros, key_v_mm_s=zeros, seg_peak_mm_s=peaks,
+                seg_hold_start_mm=seg_zeros, seg_hold_end_mm=seg_zeros, law=law,
+                uniform_slowdown=schedule.slowdown, piece_key=piece_key, piece_periods=periods,
+                piece_scale=scale, fix_rounds=schedule.rounds, scurve_acc_mm_s2=acc,
+                scurve_jerk_mm_s3=jerk, planner=lim.planner)

@@ -451,6 +451,10 @@ def scurve_plan(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s: n
     for arr in (on.key_node, on.key_kind, on.nominal, on.v, on.peak, on.hold_start, on.hold_end,
                 piece_key, piece_periods, piece_scale):
         arr.setflags(write=False)
-    return Plan(curve, lim, grid, kappa0, int(on.n_peaks), on.key_node, on.key_kind, on.nominal,
-                on.v, on.peak, on.hold_start, on.hold_end, law, slowdown, piece_key,
-                piece_periods, piece_scale, on.rounds, acc, jerk)
+    return Plan(curve=curve, limits=lim, grid=grid, kappa0_1_mm=kappa0,
+                n_peaks_above_threshold=int(on.n_peaks), key_node=on.key_node,
+                key_kind=on.key_kind, key_nominal_mm_s=on.nominal, key_v_mm_s=on.v,
+                seg_peak_mm_s=on.peak, seg_hold_start_mm=on.hold_start,
+                seg_hold_end_mm=on.hold_end, law=law, uniform_slowdown=slowdown,
+                piece_key=piece_key, piece_periods=piece_periods, piece_scale=piece_scale,
+                fix_rounds=on.rounds, scurve_acc_mm_s2=acc, scurve_jerk_mm_s3=jerk)
