@@ -29,9 +29,8 @@ from nurbsfeed.geometry.nurbs import NurbsCurve
 from nurbsfeed.planning.grid import Grid, build_grid
 from nurbsfeed.planning.limits import Limits, curvature_threshold, speed_limit
 from nurbsfeed.planning.path_check import axis_capped, least_cycle_s, path_limit
-from nurbsfeed.planning.path_model import scurve_limits
 from nurbsfeed.planning.path_plan import PathSchedule, plan_path
-from nurbsfeed.planning.plan import Plan, feed_at, grid_spacing, too_long
+from nurbsfeed.planning.plan import PathDiagnostics, Plan, feed_at, grid_spacing, too_long
 from nurbsfeed.planning.scurve_plan import scurve_plan
 
 
@@ -69,15 +68,14 @@ def _path_plan(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s: np
     if made is None:
         return None
     n_peaks = int(np.count_nonzero(grid.kappa_1_mm[grid.peak_index] >= kappa0))
-    acc, jerk = scurve_limits(lim, np.ptp(curve.points, axis=0) > 0.0)
-    plan = _schedule_plan(curve, lim, grid, kappa0, n_peaks, made, acc, jerk)
+    plan = _schedule_plan(curve, lim, grid, kappa0, n_peaks, made)
     if not plan.cycle_time_s <= max_curve_time_s:
         raise CurveError(too_long(plan.cycle_time_s, max_curve_time_s))
     return plan
 
 
 def _schedule_plan(curve: NurbsCurve, lim: Limits, grid: Grid, kappa0: float, n_peaks: int,
-                   schedule: PathSchedule, acc: float, jerk: float) -> Plan:
+                   schedule: PathSchedule) -> Plan:
     """A path schedule as a plan: its rests are the keys, one stretch between each two, whole
     periods each."""
     law = schedule.law
@@ -89,14 +87,11 @@ def _schedule_plan(curve: NurbsCurve, lim: Limits, grid: Grid, kappa0: float, n_
     scale = np.ones(periods.size)
     peaks = np.array([float(law.v0_mm_s[(law.t0_s >= key_t[k]) & (law.t0_s < key_t[k + 1])]
                             .max(initial=0.0)) for k in range(rest_nodes.size - 1)])
-    zeros = np.zeros(rest_nodes.size)
-    seg_zeros = np.zeros(peaks.size)
-    for arr in (rest_nodes, kinds, piece_key, periods, scale, peaks, zeros, seg_zeros):
+    for arr in (rest_nodes, kinds, piece_key, periods, scale, peaks):
         arr.setflags(write=False)
-    return Plan(curve=curve, limits=lim, grid=grid, kappa0_1_mm=kappa0,
-                n_peaks_above_threshold=n_peaks, key_node=rest_nodes, key_kind=kinds,
-                key_nominal_mm_s=zeros, key_v_mm_s=zeros, seg_peak_mm_s=peaks,
-                seg_hold_start_mm=seg_zeros, seg_hold_end_mm=seg_zeros, law=law,
-                uniform_slowdown=schedule.slowdown, piece_key=piece_key, piece_periods=periods,
-                piece_scale=scale, fix_rounds=schedule.rounds, scurve_acc_mm_s2=acc,
-                scurve_jerk_mm_s3=jerk, planner=lim.planner)
+    diagnostics = PathDiagnostics(kappa0_1_mm=kappa0, n_peaks_above_threshold=n_peaks,
+                                  programs=schedule.rounds, stretch_peak_mm_s=peaks)
+    return Plan(curve=curve, limits=lim, grid=grid, key_node=rest_nodes, key_kind=kinds,
+                law=law, uniform_slowdown=schedule.slowdown, piece_key=piece_key,
+                piece_periods=periods, piece_scale=scale, planner=lim.planner,
+                diagnostics=diagnostics)
