@@ -28,6 +28,7 @@ from nurbsfeed.pipeline import convert_file, plan_block, verified_plan
 from nurbsfeed.planning import rows as rows_module
 from nurbsfeed.planning.banded_lp import solve_lp
 from nurbsfeed.planning.basis import G_CAP, G_D, point_weights
+from nurbsfeed.planning.plan import PathDiagnostics, SCurveDiagnostics
 from nurbsfeed.planning.planner import plan_curve
 from nurbsfeed.planning.rows import ROWS_PER_POINT, all_rows, point_ratio
 from nurbsfeed.safety import slowdown_from_points
@@ -248,6 +249,26 @@ def test_a_straight_line_runs_within_1_percent_of_the_closed_form(length_mm: flo
     assert plan.planner == "optimal"
     assert exact * (1 - 1e-9) <= plan.cycle_time_s <= exact * 1.01 + lim.period_s
     assert plan_curve(line, scurve_of(lim)).cycle_time_s > plan.cycle_time_s
+
+
+def test_each_planner_hands_on_its_own_diagnostics() -> None:
+    """What only `nurbsfeed plan` reads comes in the planner's own record: the path planner's
+    (its keys are its rests) the programs it solved and a peak per stretch, the S-curve
+    planner's a speed per key point and a peak and holds per segment."""
+    line = NurbsCurve.build(1, [0, 0, 1, 1], [[0, 0, 0], [50.0, 0, 0]])
+    lim = PAPER_PATH.limits
+    path = plan_curve(line, lim)
+    assert path.planner == "optimal" and isinstance(path.diagnostics, PathDiagnostics)
+    assert path.diagnostics.programs >= 1
+    assert path.diagnostics.stretch_peak_mm_s.shape == path.piece_periods.shape
+    assert 0.9 * lim.feed_mm_s < path.diagnostics.stretch_peak_mm_s[0] <= lim.feed_mm_s
+    scurve = plan_curve(line, scurve_of(lim))
+    record = scurve.diagnostics
+    assert scurve.planner == "scurve" and isinstance(record, SCurveDiagnostics)
+    assert record.key_nominal_mm_s.shape == record.key_v_mm_s.shape == scurve.key_node.shape
+    assert (record.seg_peak_mm_s.shape == record.seg_hold_start_mm.shape
+            == record.seg_hold_end_mm.shape == (scurve.key_node.size - 1,))
+    assert record.seg_peak_mm_s[0] == pytest.approx(lim.feed_mm_s)
 
 
 @pytest.mark.parametrize(("name", "machine"), [("quarter-circle.json", PAPER_PATH),

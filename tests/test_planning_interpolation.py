@@ -38,7 +38,7 @@ def test_curvature_threshold_of_table_1_is_0_1(paper_limits) -> None:
 
 
 def test_butterfly_has_25_curvature_peaks_above_threshold(butterfly_plan) -> None:
-    assert butterfly_plan.n_peaks_above_threshold == 25
+    assert butterfly_plan.diagnostics.n_peaks_above_threshold == 25
     peaks = butterfly_plan.key_node[butterfly_plan.key_kind == KIND_PEAK]
     assert np.all(butterfly_plan.grid.kappa_1_mm[peaks] >= 0.1)
 
@@ -155,7 +155,7 @@ def test_straight_line_cruises_at_the_feed_and_stops_at_both_ends(paper_limits) 
     curve = line([[0, 0], [100, 0]])
     plan = plan_curve(curve, paper_limits)
     result = interpolate(plan)
-    assert plan.n_peaks_above_threshold == 0
+    assert plan.diagnostics.n_peaks_above_threshold == 0
     assert result.v_mm_s.max() == pytest.approx(100.0, rel=1e-3)
     assert result.v_mm_s[0] == 0.0 and result.v_mm_s[-1] == pytest.approx(0.0, abs=1e-9)
     # a trapezoid-like S-curve: 0 -> 100 -> 0 over 100 mm: 10 mm each ramp, 80 mm cruise

@@ -26,7 +26,7 @@ if TYPE_CHECKING:
 
     from nurbsfeed.machine import Machine
     from nurbsfeed.planning.chain import Joints
-    from nurbsfeed.planning.plan import Plan
+    from nurbsfeed.planning.plan import PathDiagnostics, Plan, SCurveDiagnostics
     from nurbsfeed.program import CurveBlock
 
 REFERENCE_NEEDS_SCIPY = ("nurbsfeed plan --reference needs scipy: "
@@ -48,7 +48,7 @@ def plan(input: Path, dialect: str, reference: bool, **kwargs: Any) -> None:
     from nurbsfeed.analysis import time_optimal_bound_s
     from nurbsfeed.chains import ChainWindow, chain_items
     from nurbsfeed.pipeline import chain_block, joint_speeds, plan_block
-    from nurbsfeed.planning.plan import KIND_NAMES
+    from nurbsfeed.planning.plan import KIND_NAMES, SCurveDiagnostics
     from nurbsfeed.readers import read_program
 
     if reference:
@@ -74,9 +74,14 @@ def plan(input: Path, dialect: str, reference: bool, **kwargs: Any) -> None:
                        f"({item.location}; u below is the chain's, 0 to 1)")
         click.echo(f"  degree {item.curve.degree}, {item.curve.n_ctrl} control points, "
                    f"length {p.length_mm:.6f} {unit}")
-        keys = (f"{len(p.key_node)} rests (the {p.planner} planner's keys)" if p.planner != "scurve"
-                else f"{len(p.key_node)} key points after {p.fix_rounds} limit-fix rounds")
-        click.echo(f"  kappa0 {p.kappa0_1_mm:.6g} 1/{unit}; {p.n_peaks_above_threshold} "
+        d = p.diagnostics
+        if isinstance(d, SCurveDiagnostics):
+            keys = f"{len(p.key_node)} key points after {d.fix_rounds} limit-fix rounds"
+            nominal, scanned = d.key_nominal_mm_s.tolist(), d.key_v_mm_s.tolist()
+        else:  # the path planner's keys are its rests: speed 0
+            keys = f"{len(p.key_node)} rests (the {p.planner} planner's keys)"
+            nominal = scanned = [0.0] * len(p.key_node)
+        click.echo(f"  kappa0 {d.kappa0_1_mm:.6g} 1/{unit}; {d.n_peaks_above_threshold} "
                    f"curvature peaks >= kappa0; {keys}")
         click.echo(f"  {'#':>3} {'kind':<6} {'u':>12} {'s':>12} {'kappa':>12} "
                    f"{'nominal':>10} {'scanned':>10}")
@@ -84,11 +89,11 @@ def plan(input: Path, dialect: str, reference: bool, **kwargs: Any) -> None:
             click.echo(f"  {k:>3} {KIND_NAMES[int(p.key_kind[k])]:<6} "
                        f"{item.curve.input_u(p.grid.u[node]):>12.8f} "
                        f"{p.grid.s_mm[node]:>12.6f} {p.grid.kappa_1_mm[node]:>12.6g} "
-                       f"{p.key_nominal_mm_s[k]:>10.4f} {p.key_v_mm_s[k]:>10.4f}")
-        if p.planner != "scurve":
-            _echo_stretches(p, unit)
+                       f"{nominal[k]:>10.4f} {scanned[k]:>10.4f}")
+        if isinstance(d, SCurveDiagnostics):
+            _echo_segments(p, d, unit)
         else:
-            _echo_segments(p, unit)
+            _echo_stretches(p, d, unit)
         if n_curves > 1:
             _echo_joints(index, found, joint_speeds(p, chain), unit)
         bound = time_optimal_bound_s(p, item)
@@ -121,34 +126,34 @@ def _echo_joints(first: int, found: Joints, speed_mm_s: np.ndarray, unit: str) -
                    f"{cap:>10} {speed_mm_s[j]:>10.4f}")
 
 
-def _echo_segments(p: Plan, unit: str) -> None:
+def _echo_segments(p: Plan, d: SCurveDiagnostics, unit: str) -> None:
     """The S-curve plan's segments between key points."""
     from nurbsfeed.planning.scurve import transition_distance_mm
 
-    a, j = p.scurve_acc_mm_s2, p.scurve_jerk_mm_s3
+    a, j = d.acc_mm_s2, d.jerk_mm_s3
     click.echo(f"  segments ({unit}, {unit}/s):")
     click.echo(f"  {'#':>3} {'length':>12} {'v_start':>10} {'v_peak':>10} {'v_end':>10} "
                f"{'hold_in':>9} {'hold_out':>9} {'cruise':>10}")
     key_s = p.key_s_mm
     for i in range(len(p.key_node) - 1):
         length = key_s[i + 1] - key_s[i]
-        vs, ve, vp = p.key_v_mm_s[i], p.key_v_mm_s[i + 1], p.seg_peak_mm_s[i]
-        cruise = (length - p.seg_hold_start_mm[i] - p.seg_hold_end_mm[i]
+        vs, ve, vp = d.key_v_mm_s[i], d.key_v_mm_s[i + 1], d.seg_peak_mm_s[i]
+        cruise = (length - d.seg_hold_start_mm[i] - d.seg_hold_end_mm[i]
                   - transition_distance_mm(vs, vp, a, j) - transition_distance_mm(vp, ve, a, j))
         click.echo(f"  {i:>3} {length:>12.6f} {vs:>10.4f} {vp:>10.4f} {ve:>10.4f} "
-                   f"{p.seg_hold_start_mm[i]:>9.4f} {p.seg_hold_end_mm[i]:>9.4f} "
+                   f"{d.seg_hold_start_mm[i]:>9.4f} {d.seg_hold_end_mm[i]:>9.4f} "
                    f"{max(cruise, 0.0):>10.4f}")
 
 
-def _echo_stretches(p: Plan, unit: str) -> None:
-    """The stretches between rests of a plan whose keys are the rests alone (the envelope and
-    optimal planners')."""
-    click.echo(f"  {p.planner} schedule: {p.fix_rounds} limit-fix rounds, uniform slowdown "
+def _echo_stretches(p: Plan, d: PathDiagnostics, unit: str) -> None:
+    """The stretches between rests of the path planner's plan, whose keys are the rests alone
+    (the count of linear programs it solved printed as its limit-fix rounds)."""
+    click.echo(f"  {p.planner} schedule: {d.programs} limit-fix rounds, uniform slowdown "
                f"{p.uniform_slowdown:.4f}; stretches between rests ({unit}, {unit}/s):")
     click.echo(f"  {'#':>3} {'length':>12} {'v_peak':>10} {'periods':>10}")
     key_s = p.key_s_mm
     for i in range(len(p.key_node) - 1):
-        click.echo(f"  {i:>3} {key_s[i + 1] - key_s[i]:>12.6f} {p.seg_peak_mm_s[i]:>10.4f} "
+        click.echo(f"  {i:>3} {key_s[i + 1] - key_s[i]:>12.6f} {d.stretch_peak_mm_s[i]:>10.4f} "
                    f"{int(p.piece_periods[i]):>10}")
 
 

@@ -1,6 +1,7 @@
-"""What planning hands on (design §2): one curve's `Plan` (its time law, whole periods and
-what `nurbsfeed plan` lists about it), the kinds of its key points, the programmed feed along
-the curve, and the grid's node spacing, which every planner plans on."""
+"""What planning hands on (design §2): one curve's `Plan` (its time law and whole periods, what
+the stepping and the pipeline read) with its planner's diagnostics (what `nurbsfeed plan` lists
+about it), the kinds of its key points, the programmed feed along the curve, and the grid's
+node spacing, which every planner plans on."""
 
 from __future__ import annotations
 
@@ -22,41 +23,70 @@ KIND_NAMES = {KIND_END: "end", KIND_PEAK: "peak", KIND_CORNER: "corner", KIND_FE
 
 
 @dataclass(frozen=True, eq=False)
-class Plan:
-    """Everything the interpolator and `plan` need about one curve (arrays read-only).
+class PlanDiagnostics:
+    """What a planner found on its way that only `nurbsfeed plan` and the tests read, never the
+    stepping: the curvature threshold kappa_0 (Eq. 16) and how many of the grid's curvature
+    peaks reach it."""
 
-    Key points (K,): grid node index, kind, nominal speed (Eq. 15 / 0 at ends and corners) and
-    planned speed after the scan. Segments (K-1,): peak speed, holds. `law` is in plan time;
-    stretch p between rests runs law(t / piece_scale[p]) in piece_periods[p] whole periods.
-    """
-
-    curve: NurbsCurve
-    limits: Limits
-    grid: Grid
     kappa0_1_mm: float
     n_peaks_above_threshold: int
-    key_node: np.ndarray
-    key_kind: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class SCurveDiagnostics(PlanDiagnostics):
+    """The S-curve planner's (planning.scurve_plan; arrays read-only). Per key point (K,): its
+    nominal speed (Eq. 15; 0 at ends and corners) and its planned speed after the scan (Eq. 22).
+    Per segment between key points (K-1,): its peak speed and holds. The limit-fix rounds, and
+    the acceleration and jerk of its S-curves: the profile's tangential limits under the paper
+    model, a share of the lowest limit they add to under the path model."""
+
     key_nominal_mm_s: np.ndarray
     key_v_mm_s: np.ndarray
     seg_peak_mm_s: np.ndarray
     seg_hold_start_mm: np.ndarray
     seg_hold_end_mm: np.ndarray
+    fix_rounds: int
+    acc_mm_s2: float
+    jerk_mm_s3: float
+
+
+@dataclass(frozen=True, eq=False)
+class PathDiagnostics(PlanDiagnostics):
+    """The path planner's (`planner: optimal`, planning.path_plan): the linear programs it
+    solved and the peak speed of each stretch between rests (P,; read-only)."""
+
+    programs: int
+    stretch_peak_mm_s: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class Plan:
+    """What the stepping and the pipeline need of one curve's plan (arrays read-only); what
+    only `nurbsfeed plan` and the tests read is in `diagnostics`.
+
+    Key points (K,): grid node index and kind; the S-curve planner's key points, the path
+    planner's rests. `law` is in plan time; stretch p between rests, from key piece_key[p] to
+    key piece_key[p + 1], runs law(t / piece_scale[p]) in piece_periods[p] whole periods.
+    """
+
+    curve: NurbsCurve
+    limits: Limits
+    grid: Grid
+    key_node: np.ndarray
+    key_kind: np.ndarray
     law: TimeLaw
-    # lambda applied to the whole law where the limit-fix rounds left nodes above their limit:
-    # the largest v / limit there (1 = none; rare, e.g. 1.23 on one random curve in 2000)
+    # lambda >= 1 applied to the whole law (1 = none): what the S-curve planner's rounds left
+    # above a limit, the largest v / limit there (rare, e.g. 1.23 on one random curve in
+    # 2000), or what the path schedule's own check asked; times, under either planner, what
+    # the pipeline's check from the points asked (planner.plan_curve's extra_slowdown)
     uniform_slowdown: float
     piece_key: np.ndarray  # (P+1,) keys where the motion is at rest: ends, corners, cusps
     piece_periods: np.ndarray  # (P,) whole periods of each stretch between rests
     piece_scale: np.ndarray  # (P,) lambda >= 1 of each stretch
-    fix_rounds: int
-    # the S-curve's own acceleration and jerk: the profile's tangential limits under the paper
-    # model, a share of the lowest limit they add to under the path model
-    scurve_acc_mm_s2: float
-    scurve_jerk_mm_s3: float
-    # "scurve": the paper's key points and S-curves; "optimal": planning.path_plan's schedule,
-    # whose keys are the rests alone (the key and segment fields above are zeros there)
-    planner: str = "scurve"
+    # "scurve": the paper's key points and S-curves, SCurveDiagnostics; "optimal":
+    # planning.path_plan's schedule, whose keys are the rests alone, PathDiagnostics
+    planner: str
+    diagnostics: SCurveDiagnostics | PathDiagnostics
 
     @cached_property
     def n_periods(self) -> int:

@@ -29,9 +29,8 @@ from nurbsfeed.geometry.nurbs import NurbsCurve
 from nurbsfeed.planning.grid import Grid, build_grid
 from nurbsfeed.planning.limits import Limits, curvature_threshold, speed_limit
 from nurbsfeed.planning.path_check import axis_capped, least_cycle_s, path_limit
-from nurbsfeed.planning.path_model import scurve_limits
 from nurbsfeed.planning.path_plan import PathSchedule, plan_path
-from nurbsfeed.planning.plan import Plan, feed_at, grid_spacing, too_long
+from nurbsfeed.planning.plan import PathDiagnostics, Plan, feed_at, grid_spacing, too_long
 from nurbsfeed.planning.scurve_plan import scurve_plan
 
 
@@ -69,28 +68,30 @@ def _path_plan(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s: np
     if made is None:
         return None
     n_peaks = int(np.count_nonzero(grid.kappa_1_mm[grid.peak_index] >= kappa0))
-    acc, jerk = scurve_limits(lim, np.ptp(curve.points, axis=0) > 0.0)
-    plan = _schedule_plan(curve, lim, grid, kappa0, n_peaks, made, acc, jerk)
+    plan = _schedule_plan(curve, lim, grid, kappa0, n_peaks, made)
     if not plan.cycle_time_s <= max_curve_time_s:
         raise CurveError(too_long(plan.cycle_time_s, max_curve_time_s))
     return plan
 
 
 def _schedule_plan(curve: NurbsCurve, lim: Limits, grid: Grid, kappa0: float, n_peaks: int,
-                   schedule: PathSchedule, acc: float, jerk: float) -> Plan:
+                   schedule: PathSchedule) -> Plan:
     """A path schedule as a plan: its rests are the keys, one stretch between each two, whole
     periods each."""
+    law = schedule.law
+    key_t = law.key_t_s
     rest_nodes = schedule.rest_nodes
-    zeros = np.zeros(rest_nodes.size)
-    key_t = schedule.law.key_t_s
+    kinds = np.asarray(schedule.kinds, dtype=np.int64)
+    piece_key = np.arange(rest_nodes.size)
     periods = np.rint(np.diff(key_t) / lim.period_s).astype(np.int64)
-    peaks = np.array([float(schedule.law.v0_mm_s[(schedule.law.t0_s >= key_t[k])
-                                                  & (schedule.law.t0_s < key_t[k + 1])]
+    scale = np.ones(periods.size)
+    peaks = np.array([float(law.v0_mm_s[(law.t0_s >= key_t[k]) & (law.t0_s < key_t[k + 1])]
                             .max(initial=0.0)) for k in range(rest_nodes.size - 1)])
-    arrays = (rest_nodes, np.asarray(schedule.kinds, dtype=np.int64), zeros, zeros.copy(), peaks,
-              np.zeros(peaks.size), np.zeros(peaks.size), np.arange(rest_nodes.size), periods,
-              np.ones(periods.size))
-    for arr in arrays:
+    for arr in (rest_nodes, kinds, piece_key, periods, scale, peaks):
         arr.setflags(write=False)
-    return Plan(curve, lim, grid, kappa0, n_peaks, *arrays[:7], schedule.law, schedule.slowdown,
-                *arrays[7:], schedule.rounds, acc, jerk, lim.planner)
+    diagnostics = PathDiagnostics(kappa0_1_mm=kappa0, n_peaks_above_threshold=n_peaks,
+                                  programs=schedule.rounds, stretch_peak_mm_s=peaks)
+    return Plan(curve=curve, limits=lim, grid=grid, key_node=rest_nodes, key_kind=kinds,
+                law=law, uniform_slowdown=schedule.slowdown, piece_key=piece_key,
+                piece_periods=periods, piece_scale=scale, planner=lim.planner,
+                diagnostics=diagnostics)

@@ -49,6 +49,7 @@ from nurbsfeed.planning.path_model import scurve_limits
 from nurbsfeed.planning.plan import (
     GRID_STEPS,
     Plan,
+    SCurveDiagnostics,
     feed_at,
     grid_spacing,
     too_long,
@@ -289,8 +290,9 @@ def _hidden_peak(seg, s_mm, limit, key_node, key_s, v, peak, hold_start, hold_en
 
 class _OnGrid(NamedTuple):
     """What `_plan_on_grid` plans on one grid: the eroded limit (M,), the key points and their
-    segments (as in `Plan`), the law's pieces (timelaw.chain_segments), key times and duration,
-    the law's speed at the nodes, the fix rounds and the segments' hidden peaks."""
+    segments (as in `Plan` and `SCurveDiagnostics`), the law's pieces (timelaw.chain_segments),
+    key times and duration, the law's speed at the nodes, the fix rounds and the segments'
+    hidden peaks."""
 
     limit: np.ndarray
     key_node: np.ndarray
@@ -451,6 +453,12 @@ def scurve_plan(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s: n
     for arr in (on.key_node, on.key_kind, on.nominal, on.v, on.peak, on.hold_start, on.hold_end,
                 piece_key, piece_periods, piece_scale):
         arr.setflags(write=False)
-    return Plan(curve, lim, grid, kappa0, int(on.n_peaks), on.key_node, on.key_kind, on.nominal,
-                on.v, on.peak, on.hold_start, on.hold_end, law, slowdown, piece_key,
-                piece_periods, piece_scale, on.rounds, acc, jerk)
+    diagnostics = SCurveDiagnostics(
+        kappa0_1_mm=kappa0, n_peaks_above_threshold=int(on.n_peaks),
+        key_nominal_mm_s=on.nominal, key_v_mm_s=on.v, seg_peak_mm_s=on.peak,
+        seg_hold_start_mm=on.hold_start, seg_hold_end_mm=on.hold_end, fix_rounds=on.rounds,
+        acc_mm_s2=acc, jerk_mm_s3=jerk)
+    return Plan(curve=curve, limits=lim, grid=grid, key_node=on.key_node, key_kind=on.key_kind,
+                law=law, uniform_slowdown=slowdown, piece_key=piece_key,
+                piece_periods=piece_periods, piece_scale=piece_scale, planner="scurve",
+                diagnostics=diagnostics)
