@@ -385,6 +385,7 @@ def rest_caps(curve: NurbsCurve, grid: Grid, lim: Limits, s_mm: np.ndarray, rest
             where = s_mm[r] + sign * ys * h
             uu = arc_parameters(curve, grid, where)
             geo = point_geometry(curve, lim, uu, feed_at_u(uu), np.full(uu.size, -1))
+            geo.setflags(write=False)  # as the layout's: point_ratio compiles for one type
             best = lim.feed_mm_s**2
             for g, y in zip(geo, ys):
                 b = y ** (4 / 3)

@@ -83,7 +83,8 @@ def plan_path(curve: NurbsCurve, grid: Grid, lim: Limits, limit: np.ndarray, cap
         return None
     for _ in range(RECUTS):
         times = np.empty(layout.cells.shape[0] + 2 * layout.first.size)
-        cell_times(schedule.c, layout.cells, layout.first, layout.last, layout.rest_h, times)
+        cell_times(np.array(schedule.c), layout.cells, layout.first, layout.last, layout.rest_h,
+                   times)
         nodes = cut_cells(curve, grid, lim, layout, times[:layout.cells.shape[0]],
                           schedule.broken_between)
         if nodes is None or nodes[0].size > MAX_CELLS:

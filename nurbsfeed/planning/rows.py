@@ -46,7 +46,6 @@ ZERO_REL = 1e-12
 # at most: 2 tangential accelerations, 6 axis accelerations, 2 tangential jerks, 6 axis
 # jerks, the normal jerk's half polygon (or its 2 rows where the curve is planar)
 ROWS_PER_POINT = 2 + 6 + 2 + 6 + NORMAL_SIDES // 2 + 1
-SHARE_ENDS = False
 # the largest b a linearization point takes, and the smallest: b0 of a row's sqrt(b)
 B_FLOOR = 1e-12
 
@@ -78,16 +77,6 @@ def _normal_axes(g):
 
 
 @jit
-def _same_point(g, h):
-    """Whether two geometry rows are one point's (a cell's end and the next one's start away
-    from a knot, read at the same parameter)."""
-    for i in range(g.size):  # noqa: SIM110 - a generator is not compiled
-        if g[i] != h[i]:
-            return False
-    return True
-
-
-@jit
 def _jerk_tangent(jerk, jump, b0):
     """A jerk row's (slope, bound): |L| + slope b <= bound, the tangent at b0 of the limit
     |L| <= J / sqrt(b) - sqrt(b) jump, where a jump of kappa N read over one period adds
@@ -102,12 +91,12 @@ def _jerk_tangent(jerk, jump, b0):
 
 
 @jit
-def cell_rows(c_lin, cells, geo, q, shared_end, lim_t, acc_t, jerk_n, acc_x, jerk_x, period,
-              idx, val, rhs, r):
+def cell_rows(c_lin, cells, geo, q, lim_t, acc_t, jerk_n, acc_x, jerk_x, period, idx, val, rhs,
+              r):
     """Write the rows of inner cell q, linearized at the coefficients c_lin, from row r on:
-    idx (first coefficient), val (3 weights), rhs. Returns the next free row. Where
-    shared_end, the cell's end is the next cell's start (C1: the same b and b' there), and
-    only its rows with b'' (the jerks along T and per axis) are its own."""
+    idx (first coefficient), val (3 weights), rhs. Returns the next free row. (A cell's end and
+    the next one's start give the same rows but for b'': left in, the interior-point solver
+    does better with them, one 2 mm figure-eight's first program stalled without.)"""
     w = np.empty((3, 3))
     i0 = int(cells[q, 0])
     g0, g1, w0, h = cells[q, 1], cells[q, 2], cells[q, 3], cells[q, 4]
@@ -120,12 +109,9 @@ def cell_rows(c_lin, cells, geo, q, shared_end, lim_t, acc_t, jerk_n, acc_x, jer
         b0 = max(b0, B_FLOOR)
         root = math.sqrt(b0)
         k = g[G_KAPPA]
-        own = not (p == 2 and shared_end)
         # (b <= cap^2 is the box's: each coefficient is capped by its cells' lowest cap)
         # |b'| <= 2 A_t
         for sign in (1.0, -1.0):
-            if not own:
-                break
             for j in range(3):
                 val[r, j] = sign * w[1, j]
             idx[r] = i0
@@ -136,8 +122,7 @@ def cell_rows(c_lin, cells, geo, q, shared_end, lim_t, acc_t, jerk_n, acc_x, jer
         ks_size = math.sqrt(g[G_KS] ** 2 + g[G_KS + 1] ** 2 + g[G_KS + 2] ** 2)
         for x in range(3):
             tx, kx = g[G_T + x], g[G_K + x]
-            if not own or acc_x[x] == np.inf or (abs(tx) <= ZERO_REL
-                                                 and abs(kx) <= ZERO_REL * k_size):
+            if acc_x[x] == np.inf or (abs(tx) <= ZERO_REL and abs(kx) <= ZERO_REL * k_size):
                 continue
             for sign in (1.0, -1.0):
                 for j in range(3):
@@ -166,8 +151,6 @@ def cell_rows(c_lin, cells, geo, q, shared_end, lim_t, acc_t, jerk_n, acc_x, jer
                 idx[r] = i0
                 rhs[r] = bound
                 r += 1
-        if not own:
-            continue
         nx, ny, nz, kn, kb = _normal_axes(g)
         jump = math.sqrt(g[G_D] ** 2 + g[G_D + 1] ** 2 + g[G_D + 2] ** 2) / period
         slope, bound = _jerk_tangent(jerk_n, jump, b0)
@@ -194,13 +177,10 @@ def cell_rows(c_lin, cells, geo, q, shared_end, lim_t, acc_t, jerk_n, acc_x, jer
 @jit
 def all_rows(c_lin, cells, geo, lim_t, acc_t, jerk_n, acc_x, jerk_x, period, idx, val, rhs):
     """Every inner cell's rows (`cell_rows`) into idx (R,), val (R, 3), rhs (R,); returns R."""
-    r = 0
-    q_n = cells.shape[0]
-    for q in range(q_n):
-        shared = (SHARE_ENDS and q + 1 < q_n and int(cells[q + 1, 0]) == int(cells[q, 0]) + 1
-                  and _same_point(geo[q, 2], geo[q + 1, 0]))
-        r = cell_rows(c_lin, cells, geo, q, shared, lim_t, acc_t, jerk_n, acc_x, jerk_x,
-                      period, idx, val, rhs, r)
+    r = np.int64(0)  # (a literal 0 would compile cell_rows a second time)
+    for q in range(cells.shape[0]):
+        r = cell_rows(c_lin, cells, geo, q, lim_t, acc_t, jerk_n, acc_x, jerk_x, period, idx,
+                      val, rhs, r)
     return r
 
 

@@ -146,7 +146,7 @@ def schedule_law(schedule: Schedule, period_s: float, extra_slowdown: float = 1.
     """The law (module docstring), and the time (R,) it passes each rest."""
     lay = schedule.layout
     times = np.empty(lay.cells.shape[0] + 2 * lay.first.size)
-    cell_times(schedule.c, lay.cells, lay.first, lay.last, lay.rest_h, times)
+    cell_times(np.array(schedule.c), lay.cells, lay.first, lay.last, lay.rest_h, times)
     q_n = lay.cells.shape[0]
     _law_times(schedule.c, lay.cells, times)
     rests = np.flatnonzero(lay.rest)

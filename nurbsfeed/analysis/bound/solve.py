@@ -178,7 +178,7 @@ def jerk_limited_schedule(curve: NurbsCurve, limits: Limits,
         iterations += 1
         lin_nodes = np.maximum(x[:m], floor_b)
         lin_points = np.maximum(pts.value(pts.b, x), floor_b)
-        rows, bounds = [], []
+        jerk_rows, bounds = [], []
         for coef, lim, jump in jerk_coefs:
             # L <= J / sqrt(b) - jump sqrt(b), convex in b: its tangent, where a jump is, at b
             # or at the jump's own limit J / jump, the lower (beyond it the tangent cuts 0)
@@ -187,9 +187,9 @@ def jerk_limited_schedule(curve: NurbsCurve, limits: Limits,
                     jump > 0.0, jump, 1.0)), lin_points)
             root_at = np.sqrt(at)
             slope = 0.5 * lim / (at * root_at) + 0.5 * jump / root_at
-            rows.append(rows_of(coef + slope[:, None] * pts.b, np.ones(n_pts)))
+            jerk_rows.append(rows_of(coef + slope[:, None] * pts.b, np.ones(n_pts)))
             bounds.append(1.5 * lim / root_at - 0.5 * jump * root_at)
-        a_ub = sp.vstack(fixed_rows + rows)
+        a_ub = sp.vstack(fixed_rows + jerk_rows)
         b_ub = np.concatenate(fixed_rhs + bounds)
         x, lam, scaled = solve(weight / lin_nodes**1.5, a_ub.tocsr(), b_ub, node_cap**2)
         if scaled < best_scaled:
