@@ -38,7 +38,7 @@ from tests.test_degenerate import EXAMPLES, degenerate_curves
 from tests.test_path_model import assert_keeps_every_path_limit
 
 ROOT = Path(__file__).resolve().parents[1]
-DATA = Path(__file__).parent / "data" / "envelope"
+DATA = Path(__file__).parent / "data" / "path_planner"
 DEFAULT = load_machine("default")
 PAPER_PATH = load_machine("paper-table1", {"jerk_model": "path", "planner": "optimal"})
 # the issue's bound on the cycle over the jerk-limited reference (measured: 0.97-1.016)
@@ -471,3 +471,19 @@ def test_jumps_reach_the_rows_only_at_knots() -> None:
     lim = DEFAULT.limits
     layout, _ = layout_and_schedule(sample_block("butterfly.json").curve, lim)
     assert not np.any(layout.geo[:, :, G_D:G_D + 3])
+
+
+def test_a_stretch_too_short_for_its_own_knots_is_planned_by_the_scurve_planner(
+        tmp_path: Path) -> None:
+    """Fuzz seed 60 (gcode-6000188-981): the second curve rests twice within a few millionths
+    of its length, a stretch no node can be added to (nodes closer than 10^-6 of the length
+    are one), and the layout indexed its empty cells: an internal error. That curve is the
+    S-curve planner's now, the first the path planner's; the program converts and check passes
+    it."""
+    name = "two-rests-a-hair-apart.ngc"
+    out = tmp_path / "out.nc"
+    convert_file(DATA / name, out, DEFAULT)
+    report = check_files(DATA / name, out, DEFAULT)
+    assert report.ok, "\n".join(map(str, report.violations))
+    planners = [plan_block(block, DEFAULT).planner for block in curve_blocks(DATA / name)]
+    assert planners == ["optimal", "scurve"]

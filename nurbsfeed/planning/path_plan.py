@@ -24,6 +24,7 @@ from nurbsfeed.planning.timelaw import TimeLaw
 # past this many periods a curve keeps the S-curve plan, whose pieces do not grow with its
 # duration (the law holds a piece a period)
 MAX_LAW_PERIODS = 1_000_000
+MIN_STRETCH_NODES = 3  # nodes from one rest to the next (the next counted) a stretch needs
 # past this many cells too: the programs' rows take 4 kB a cell
 MAX_CELLS = 40_000
 # a schedule that dwells in cells far longer than the estimate sized them, or breaks a limit
@@ -74,7 +75,10 @@ def plan_path(curve: NurbsCurve, grid: Grid, lim: Limits, limit: np.ndarray, cap
         return None
     nodes = schedule_nodes(curve, grid, lim, rests, cap, curvature_threshold(lim), feed_breaks,
                            MAX_CELLS)
-    if nodes is None or int(nodes[2].sum()) != rests.size:
+    # a stretch needs two knots of its own between its rest cells: one too short to hold them
+    # (a few millionths of the curve between two rests) is the S-curve plan's
+    if (nodes is None or int(nodes[2].sum()) != rests.size
+            or np.diff(np.flatnonzero(nodes[2])).min() < MIN_STRETCH_NODES):
         return None
     s_mm, u, rest, v_estimate = nodes
     layout = build_layout(curve, grid, lim, s_mm, u, rest, v_estimate, feed_at_u)
