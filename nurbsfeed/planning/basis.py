@@ -9,6 +9,8 @@ is what makes every limit a row over three consecutive variables (planning.rows)
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from nurbsfeed.jit import jit
 
 # the geometry of one point, as the rows read it (`cells.Layout.geo`, (Q, 3, G_SIZE)): kappa,
@@ -16,7 +18,7 @@ from nurbsfeed.jit import jit
 G_KAPPA, G_T, G_K, G_KS, G_D, G_CAP = 0, 1, 4, 7, 10, 13
 G_SIZE = 14
 POINTS = (0.0, 0.5, 1.0)  # where a cell's limits are read: its start, middle and end
-BETWEEN = (0.25, 0.75)  # ... and checked once planned (`cells.cut_cells`)
+BETWEEN = (0.25, 0.75)  # ... and checked once planned (`nodes.cut_cells`)
 
 
 @jit
@@ -32,3 +34,41 @@ def point_weights(g0, g1, w0, h, x, out):
         out[0, j] = b0 + s0 * xs + 0.5 * dd * xs * xs
         out[1, j] = s0 + dd * xs
         out[2, j] = dd
+
+
+@dataclass(frozen=True)
+class EndState:
+    """The motion's state at one end of a chain it does not rest at: the path speed (> 0)
+    and the tangential acceleration, d v / dt (planning.path_plan: the chain's look-ahead
+    runs on across its ends, design §3b)."""
+
+    speed_mm_s: float
+    acc_mm_s2: float
+
+    @property
+    def b(self) -> float:
+        """b = v^2 there."""
+        return self.speed_mm_s**2
+
+    @property
+    def db_ds(self) -> float:
+        """b' = db / ds = 2 a there."""
+        return 2.0 * self.acc_mm_s2
+
+
+@dataclass(frozen=True)
+class ChainEnds:
+    """How a chain starts and ends: at rest (None), as every curve alone does, or moving."""
+
+    start: EndState | None = None
+    end: EndState | None = None
+
+    @property
+    def moving(self) -> tuple[bool, bool]:
+        return self.start is not None, self.end is not None
+
+    def side(self, i: int) -> EndState | None:
+        return self.start if i == 0 else self.end
+
+
+AT_REST = ChainEnds()

@@ -13,11 +13,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from nurbsfeed.geometry.nurbs import NurbsCurve
-from nurbsfeed.planning.cells import build_layout, cut_cells, schedule_nodes
+from nurbsfeed.planning.basis import AT_REST, ChainEnds
+from nurbsfeed.planning.cells import build_layout
 from nurbsfeed.planning.grid import Grid
 from nurbsfeed.planning.limits import Limits, curvature_threshold
+from nurbsfeed.planning.nodes import cut_cells, schedule_nodes
 from nurbsfeed.planning.plan import KIND_CORNER, KIND_CUSP, KIND_END
-from nurbsfeed.planning.schedule import cell_times, plan_schedule
+from nurbsfeed.planning.schedule import Schedule, cell_times, plan_schedule
 from nurbsfeed.planning.schedule_law import schedule_law
 from nurbsfeed.planning.timelaw import TimeLaw
 
@@ -28,22 +30,31 @@ MIN_STRETCH_NODES = 3  # nodes from one rest to the next (the next counted) a st
 # past this many cells too: the programs' rows take 4 kB a cell
 MAX_CELLS = 40_000
 # a schedule that dwells in cells far longer than the estimate sized them, or breaks a limit
-# between a cell's points, is planned again on cells cut (cells.cut_cells), this many times at
+# between a cell's points, is planned again on cells cut (nodes.cut_cells), this many times at
 # most
 RECUTS = 2
+# ... and a chain with a moving end this many: it cannot take back what its points break by a
+# slowdown
+RECUTS_MOVING = 5
+# a chain that ends moving keeps the state it was given there, so its schedule may not be
+# slowed: past this slowdown it is not planned; below it (the programs' rounding: their rows
+# hold to 1e-7 of their bounds) the stretch at the moving end is not slowed (schedule_law)
+OPEN_SLOWDOWN_REL = 1e-6
 
 
 @dataclass(frozen=True, eq=False)
 class PathSchedule:
     """What planning.planner makes a Plan of: the law (whole periods per stretch, every
     slowdown applied), the slowdown the schedule's own check asked for (>= 1), the linear
-    programs solved, the grid nodes (R,) the motion rests at and their kinds (R,)."""
+    programs solved, the grid nodes (R,) the motion rests at and their kinds (R,) (a moving
+    end of the chain among them: the end of its stretch), and the schedule itself."""
 
     law: TimeLaw
     slowdown: float
     rounds: int
     rest_nodes: np.ndarray
     kinds: np.ndarray
+    schedule: Schedule
 
 
 def rest_nodes(grid: Grid, limit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -63,29 +74,48 @@ def rest_nodes(grid: Grid, limit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def plan_path(curve: NurbsCurve, grid: Grid, lim: Limits, limit: np.ndarray, cap: np.ndarray,
               feed_at_u: Callable[[np.ndarray], np.ndarray], feed_breaks: np.ndarray,
-              extra_slowdown: float = 1.0) -> PathSchedule | None:
+              extra_slowdown: float = 1.0, ends: ChainEnds = AT_REST,
+              seed: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+              ) -> PathSchedule | None:
     """The schedule of `curve` on `grid` under `lim` (path model); limit (M,): the pointwise
     speed limit at the grid's nodes with a = j = 0 (it says where the motion rests); cap (M,):
     the caps on the speed there (chord error, normal acceleration, feeds, axis velocities);
     feed_breaks: the parameters where the programmed feed changes; None where it cannot plan
     (a stretch of no length between two rests, over MAX_CELLS cells, no program solved, a law
-    above MAX_LAW_PERIODS periods)."""
+    above MAX_LAW_PERIODS periods).
+
+    The curve is a chain (design §3b) that starts and ends at rest, or moving in the state
+    `ends` gives (its speed and acceleration there): the look-ahead of a chain planned in
+    windows. A moving end's state is kept as given, so such a chain is not planned (None) where
+    it breaks a limit there, where the curve must rest there (a corner, a pointwise limit of
+    0), where no program solves, or where its schedule would have to be slowed. seed: the
+    plan that state comes from where the two overlap, as its nodes' arc (N,) on this curve,
+    its coefficients' abscissae and values (K,): its cells are this plan's there and its
+    schedule the first program's linearisation point, so that it is a schedule this plan's
+    programs allow (a time-optimal plan rides its limits: from its state, a plan on nodes of
+    its own may find no way to brake in time)."""
     rests, kinds = rest_nodes(grid, limit)
     if rests.size < 2 or not np.all(np.diff(grid.s_mm[rests]) > 0.0):
         return None
+    moving = np.array(ends.moving)
+    ends_at = np.array([0, grid.u.size - 1])
+    must_rest = (~(limit[ends_at] > 0.0) | np.isinf(grid.kappa_1_mm[ends_at])
+                 | np.isin(ends_at, np.asarray(grid.stop_index, dtype=np.int64)))
+    if np.any(moving & must_rest):
+        return None
     nodes = schedule_nodes(curve, grid, lim, rests, cap, curvature_threshold(lim), feed_breaks,
-                           MAX_CELLS)
+                           MAX_CELLS, ends, np.empty(0) if seed is None else seed[0])
     # a stretch needs two knots of its own between its rest cells: one too short to hold them
     # (a few millionths of the curve between two rests) is the S-curve plan's
     if (nodes is None or int(nodes[2].sum()) != rests.size
             or np.diff(np.flatnonzero(nodes[2])).min() < MIN_STRETCH_NODES):
         return None
     s_mm, u, rest, v_estimate = nodes
-    layout = build_layout(curve, grid, lim, s_mm, u, rest, v_estimate, feed_at_u)
-    schedule = plan_schedule(layout, lim)
+    layout = build_layout(curve, grid, lim, s_mm, u, rest, v_estimate, feed_at_u, ends)
+    schedule = plan_schedule(layout, lim, None, None if seed is None else seed[1:])
     if not schedule.solved:
         return None
-    for _ in range(RECUTS):
+    for _ in range(RECUTS_MOVING if moving.any() else RECUTS):
         times = np.empty(layout.cells.shape[0] + 2 * layout.first.size)
         cell_times(np.array(schedule.c), layout.cells, layout.first, layout.last, layout.rest_h,
                    times)
@@ -93,7 +123,7 @@ def plan_path(curve: NurbsCurve, grid: Grid, lim: Limits, limit: np.ndarray, cap
                           schedule.broken_between)
         if nodes is None or nodes[0].size > MAX_CELLS:
             break
-        finer = build_layout(curve, grid, lim, *nodes, feed_at_u)
+        finer = build_layout(curve, grid, lim, *nodes, feed_at_u, ends)
         # linearised first at the last schedule (its polygon): it is nearly the answer
         cut = plan_schedule(finer, lim, np.interp(finer.xi, layout.xi, schedule.c))
         if not cut.solved:
@@ -101,5 +131,8 @@ def plan_path(curve: NurbsCurve, grid: Grid, lim: Limits, limit: np.ndarray, cap
         layout, schedule = finer, cut
     if not schedule.cycle_s * schedule.slowdown * extra_slowdown < MAX_LAW_PERIODS * lim.period_s:
         return None
+    if moving.any() and schedule.slowdown * extra_slowdown > 1.0 + OPEN_SLOWDOWN_REL:
+        return None
     law, _ = schedule_law(schedule, lim.period_s, extra_slowdown)
-    return PathSchedule(law, schedule.slowdown * extra_slowdown, schedule.programs, rests, kinds)
+    return PathSchedule(law, schedule.slowdown * extra_slowdown, schedule.programs, rests, kinds,
+                        schedule)

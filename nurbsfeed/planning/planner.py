@@ -12,7 +12,9 @@ The profile key `planner` chooses the planner, `jerk_model` what the machine's l
   along and across the path and per axis, at each cell's start, middle and end), and a short
   sequence of programs (planning.schedule, solved by planning.banded_lp) makes it as fast as
   they allow; planning.schedule_law samples it at the periods. Where it cannot plan (a law
-  longer than path_plan.MAX_LAW_PERIODS) the S-curve plan stands in.
+  longer than path_plan.MAX_LAW_PERIODS) the S-curve plan stands in. Its unit is a chain of
+  curves merged into one: at rest at both ends, or (`chain_schedule`) moving at either in a
+  given state, for a chain planned in windows.
 
 Every plan then goes to `pipeline.verified_plan`, which steps it and reads its points as
 positions; the motion guard (`safety`) refuses what is still above a limit.
@@ -26,6 +28,7 @@ import numpy as np
 
 from nurbsfeed.errors import CurveError
 from nurbsfeed.geometry.nurbs import NurbsCurve
+from nurbsfeed.planning.basis import AT_REST, ChainEnds
 from nurbsfeed.planning.grid import Grid, build_grid
 from nurbsfeed.planning.limits import Limits, curvature_threshold, speed_limit
 from nurbsfeed.planning.path_check import axis_capped, least_cycle_s, path_limit
@@ -54,6 +57,34 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
 def _path_plan(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s: np.ndarray,
                max_curve_time_s: float, extra_slowdown: float) -> Plan | None:
     """planning.path_plan's plan on the planning grid; None where it cannot plan."""
+    made = _path_schedule(curve, lim, feed_u, feed_mm_s, max_curve_time_s, extra_slowdown)
+    if made is None:
+        return None
+    grid, kappa0, schedule = made
+    n_peaks = int(np.count_nonzero(grid.kappa_1_mm[grid.peak_index] >= kappa0))
+    plan = _schedule_plan(curve, lim, grid, kappa0, n_peaks, schedule)
+    if not plan.cycle_time_s <= max_curve_time_s:
+        raise CurveError(too_long(plan.cycle_time_s, max_curve_time_s))
+    return plan
+
+
+def chain_schedule(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s: np.ndarray,
+                   ends: ChainEnds, seed: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+                   ) -> PathSchedule | None:
+    """The path planner's schedule of a chain (merged into `curve`) that starts or ends moving
+    in the state `ends` gives (the unit a chain planned in windows is made of, design §3b); None
+    where it cannot be planned so (path_plan.plan_path). Its law starts at its first point and
+    ends at its last: a moving end is reached within a share of a period. seed: the plan the
+    state comes from (path_plan.plan_path)."""
+    made = _path_schedule(curve, lim, feed_u, feed_mm_s, math.inf, 1.0, ends, seed)
+    return None if made is None else made[2]
+
+
+def _path_schedule(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s: np.ndarray,
+                   max_curve_time_s: float, extra_slowdown: float, ends: ChainEnds = AT_REST,
+                   seed: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+                   ) -> tuple[Grid, float, PathSchedule] | None:
+    """The planning grid, kappa_0 and planning.path_plan's schedule on the grid."""
     feed_breaks = feed_u[1:] if feed_u.size else feed_u
     kappa0 = curvature_threshold(lim)
     grid = build_grid(curve, grid_spacing(curve, lim), feed_breaks, kappa0)
@@ -64,14 +95,9 @@ def _path_plan(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s: np
     caps = speed_limit(grid.kappa_1_mm, lim, fcap)
     limit, _ = path_limit(curve, grid, lim, caps)
     made = plan_path(curve, grid, lim, limit, axis_capped(curve, grid, lim, caps),
-                     lambda u: feed_at(u, feed_u, feed_mm_s), feed_breaks, extra_slowdown)
-    if made is None:
-        return None
-    n_peaks = int(np.count_nonzero(grid.kappa_1_mm[grid.peak_index] >= kappa0))
-    plan = _schedule_plan(curve, lim, grid, kappa0, n_peaks, made)
-    if not plan.cycle_time_s <= max_curve_time_s:
-        raise CurveError(too_long(plan.cycle_time_s, max_curve_time_s))
-    return plan
+                     lambda u: feed_at(u, feed_u, feed_mm_s), feed_breaks, extra_slowdown, ends,
+                     seed)
+    return None if made is None else (grid, kappa0, made)
 
 
 def _schedule_plan(curve: NurbsCurve, lim: Limits, grid: Grid, kappa0: float, n_peaks: int,

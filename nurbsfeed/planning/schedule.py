@@ -167,17 +167,45 @@ def _fold_rests(layout: Layout, idx: np.ndarray, val: np.ndarray) -> None:
     """Rows over a stretch's end coefficient rewritten over the one beside it: the rest cell's
     C1 join makes c_end = c_inner / ratio (so that a row keeps three consecutive variables)."""
     for s in range(layout.first.size):
-        for end, inner, ratio in ((layout.first[s], layout.first[s] + 1, layout.rest_ratio[s, 0]),
-                                  (layout.last[s], layout.last[s] - 1, layout.rest_ratio[s, 1])):
+        for side, (end, inner, ratio) in enumerate((
+                (layout.first[s], layout.first[s] + 1, layout.rest_ratio[s, 0]),
+                (layout.last[s], layout.last[s] - 1, layout.rest_ratio[s, 1]))):
+            if layout.is_open(s, side):
+                continue
             rows = np.flatnonzero((idx <= end) & (idx + 2 >= end))
             je, ji = end - idx[rows], inner - idx[rows]
             val[rows, ji] += val[rows, je] / ratio
             val[rows, je] = 0.0
 
 
-def plan_schedule(layout: Layout, lim: Limits, start: np.ndarray | None = None) -> Schedule:
+def _fix_ends(layout: Layout, idx: np.ndarray, val: np.ndarray, rhs: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    """The rows with the coefficients a moving end fixes (`Layout.fixed`) moved to their right
+    side, and those left without a variable dropped; also whether the fixed state itself
+    breaks one of those by more than BETWEEN_REL of its bound (it is the state the chain
+    starts or ends in: a schedule cannot change it)."""
+    fixed, values = layout.fixed_index, layout.fixed_values
+    if fixed.size == 0:
+        return idx, val, rhs, False
+    rhs = rhs.copy()
+    bound = np.abs(rhs)
+    for k, value in zip(fixed, values):
+        rows = np.flatnonzero((idx <= k) & (idx + 2 >= k))
+        j = k - idx[rows]
+        rhs[rows] -= val[rows, j] * value
+        val[rows, j] = 0.0
+    empty = ~np.any(val != 0.0, axis=1)
+    broken = bool(np.any(rhs[empty] < -BETWEEN_REL * bound[empty]))
+    keep = ~empty
+    return idx[keep], val[keep], rhs[keep], broken
+
+
+def plan_schedule(layout: Layout, lim: Limits, start: np.ndarray | None = None,
+                  seed: tuple[np.ndarray, np.ndarray] | None = None) -> Schedule:
     """The schedule on `layout` under `lim` (module docstring); start: coefficients (C,) to
-    linearise the first program at (by default, each limit's value at b' = b'' = 0)."""
+    linearise the first program at (by default, each limit's value at b' = b'' = 0, and where
+    a seed (xi (K,), c (K,)) covers the coefficients, its: the schedule a moving end's state
+    comes from, whose rows hold there at its own point)."""
     acc_x = np.array(lim.axis_acc_mm_s2, dtype=float)
     vel_x = np.array(lim.axis_vel_mm_s, dtype=float)
     jerk_x = np.array(lim.axis_jerk_mm_s3, dtype=float)
@@ -196,20 +224,29 @@ def plan_schedule(layout: Layout, lim: Limits, start: np.ndarray | None = None) 
         for j in range(3):
             np.minimum.at(start, i0 + j, sb.min(axis=1))
         start = np.minimum(start, layout.b_estimate)
+        _moving_start(layout, lim, start)
+        if seed is not None:
+            span = 1e-9 * max(float(layout.xi[-1]), 1.0)
+            inside = (layout.xi >= seed[0][0] - span) & (layout.xi <= seed[0][-1] + span)
+            start[inside] = np.interp(layout.xi[inside], *seed)
         _join_rests(layout, start)
     # the box: the caps, with each end folded onto the coefficient beside it
     upper = layout.cap.copy()
     for s in range(layout.first.size):
         f, e = layout.first[s], layout.last[s]
-        upper[f + 1] = min(upper[f + 1], upper[f] * layout.rest_ratio[s, 0])
-        upper[e - 1] = min(upper[e - 1], upper[e] * layout.rest_ratio[s, 1])
+        if not layout.is_open(s, 0):
+            upper[f + 1] = min(upper[f + 1], upper[f] * layout.rest_ratio[s, 0])
+        if not layout.is_open(s, 1):
+            upper[e - 1] = min(upper[e - 1], upper[e] * layout.rest_ratio[s, 1])
         upper[f] = upper[e] = 0.0
+    upper[layout.fixed_index] = 0.0  # (the programs see them on their rows' right side)
     size = q_n * 3 * ROWS_PER_POINT
     idx, val, rhs = np.empty(size, dtype=np.int64), np.empty((size, 3)), np.empty(size)
     times = np.empty(q_n + 2 * layout.first.size)
     weights = np.empty(n)
     hist = np.empty((0, 5))  # (the solver's iteration record: not kept)
     c = start.copy()
+    c[layout.fixed_index] = layout.fixed_values
     best_c, best_t = None, math.inf
     programs = 0
     for programs in range(1, MAX_PROGRAMS + 1):
@@ -217,13 +254,20 @@ def plan_schedule(layout: Layout, lim: Limits, start: np.ndarray | None = None) 
                      jerk_x, lim.period_s, idx, val, rhs)
         ri, rv, rr = idx[:r].copy(), val[:r].copy(), rhs[:r].copy()
         _fold_rests(layout, ri, rv)
+        ri, rv, rr, state_breaks = _fix_ends(layout, ri, rv, rr)
+        if state_breaks:
+            break
+        r = ri.size
         _time_weights(c, cells, layout.first, layout.last, layout.rest_h, layout.rest_ratio,
                       weights)
         for s in range(layout.first.size):
             f, e = layout.first[s], layout.last[s]
-            weights[f + 1] += weights[f] / layout.rest_ratio[s, 0]
-            weights[e - 1] += weights[e] / layout.rest_ratio[s, 1]
+            if not layout.is_open(s, 0):
+                weights[f + 1] += weights[f] / layout.rest_ratio[s, 0]
+            if not layout.is_open(s, 1):
+                weights[e - 1] += weights[e] / layout.rest_ratio[s, 1]
             weights[f] = weights[e] = 0.0
+        weights[layout.fixed_index] = 0.0
         objective = -weights / max(float(weights.max()), 1e-300)
         x_lin = np.minimum(c, upper)
         left = np.einsum("rj,rj->r", rv, x_lin[ri[:, None] + np.arange(3)])
@@ -269,6 +313,7 @@ def plan_schedule(layout: Layout, lim: Limits, start: np.ndarray | None = None) 
     ratios = np.empty(q_n)
     cell_ratios(best_c, cells, geo, np.array(POINTS), lim.jerk_mm_s3, lim.acc_mm_s2,
                 lim.normal_jerk_mm_s3, acc_x, vel_x, jerk_x, lim.period_s, ratios)
+    _open_end_ratios(layout, lim, best_c, ratios)
     slowdown = max(1.0, float(ratios.max(initial=0.0)))
     between = np.empty(q_n)
     cell_ratios(best_c, cells, layout.between, np.array(BETWEEN), lim.jerk_mm_s3, lim.acc_mm_s2,
@@ -278,8 +323,48 @@ def plan_schedule(layout: Layout, lim: Limits, start: np.ndarray | None = None) 
                     between > 1.0 + BETWEEN_REL)
 
 
+def _moving_start(layout: Layout, lim: Limits, start: np.ndarray) -> None:
+    """The first program's linearisation point near a moving end: the speed estimate (no
+    schedule is faster). The jerk rows' tangents are taken at it, and one taken below a third
+    of the b a schedule must have there asks more than the limit allows (J (3/2 - b / (2 b0)) /
+    sqrt(b0) reaches 0 at b = 3 b0): near a moving end b stays close to the b it fixes for as
+    long as the jerk and acceleration limits take to change it, v (v / A + A / J) (twice that
+    reach is taken)."""
+    for side in range(2):
+        if not layout.moving[side]:
+            continue
+        b_end = layout.fixed[side, 1 - side]
+        v = math.sqrt(b_end)
+        reach = 2.0 * v * (v / lim.acc_mm_s2 + lim.acc_mm_s2 / lim.jerk_mm_s3)
+        x_end = layout.xi[0] if side == 0 else layout.xi[-1]
+        near = np.abs(layout.xi - x_end) <= reach
+        start[near] = np.minimum(layout.b_estimate[near], layout.cap[near])
+
+
+def _open_end_ratios(layout: Layout, lim: Limits, c: np.ndarray, ratios: np.ndarray) -> None:
+    """The ratios of the cells at a moving end read without the end itself: the state there is
+    the one the chain was given (what it breaks, within BETWEEN_REL, `_fix_ends`, is not this
+    schedule's to take back)."""
+    for side, q, points in ((0, 0, (0.5, 1.0)), (1, layout.cells.shape[0] - 1, (0.0, 0.5))):
+        if not layout.moving[side]:
+            continue
+        keep = [1, 2] if side == 0 else [0, 1]
+        geo = np.ascontiguousarray(layout.geo[q:q + 1, keep])
+        geo.setflags(write=False)  # as the layout's: cell_ratios compiles for one type
+        out = np.empty(1)
+        cell_ratios(c, layout.cells[q:q + 1], geo, np.array(points), lim.jerk_mm_s3,
+                    lim.acc_mm_s2, lim.normal_jerk_mm_s3, np.array(lim.axis_acc_mm_s2, dtype=float),
+                    np.array(lim.axis_vel_mm_s, dtype=float),
+                    np.array(lim.axis_jerk_mm_s3, dtype=float), lim.period_s, out)
+        ratios[q] = out[0]
+
+
 def _join_rests(layout: Layout, c: np.ndarray) -> None:
-    """Each stretch's end coefficients from the ones beside them (the rest cells' C1 join)."""
+    """Each stretch's end coefficients from the ones beside them (the rest cells' C1 join), and
+    those a moving end fixes."""
     for s in range(layout.first.size):
-        c[layout.first[s]] = c[layout.first[s] + 1] / layout.rest_ratio[s, 0]
-        c[layout.last[s]] = c[layout.last[s] - 1] / layout.rest_ratio[s, 1]
+        if not layout.is_open(s, 0):
+            c[layout.first[s]] = c[layout.first[s] + 1] / layout.rest_ratio[s, 0]
+        if not layout.is_open(s, 1):
+            c[layout.last[s]] = c[layout.last[s] - 1] / layout.rest_ratio[s, 1]
+    c[layout.fixed_index] = layout.fixed_values

@@ -24,6 +24,7 @@ from nurbsfeed.planning.timelaw import TimeLaw
 NEWTON_STEPS = 30
 GAUSS_X, GAUSS_W = np.polynomial.legendre.leggauss(4)
 PIECES = 8  # equal parts of a cell, each timed by GAUSS_X
+MIN_SHARE = 1e-6  # of a period: the shortest piece at a moving end
 
 
 @jit
@@ -70,17 +71,18 @@ def _time_to(c, cells, q, pieces, x):
 
 @jit
 def _sample_stretch(c, cells, cell_node, q_first, q_last, s_nodes, node0, node1, times, rest_t,
-                    rest_h, b_far, scale, n, out_s, out_v):
-    """s and v (n + 1,) at the n + 1 period instants of one stretch, its time stretched by
-    scale (schedule time = law time / scale). Cells q_first..q_last (inner) with their times
-    (`_piece_times`), the rest cells' durations rest_t (2,), lengths rest_h (2,), far values
-    b_far (2,); s_nodes: the nodes' arc, cell_node: each cell's first node, node0 and node1:
-    the stretch's rests. Within a cell each instant is found by Newton's method from the last
-    one, safeguarded by bisection."""
+                    rest_h, b_far, scale, instants, out_s, out_v):
+    """s and v (n + 1,) at the n + 1 instants (schedule time) of one stretch, its time
+    stretched by scale (schedule time = law time / scale). Cells q_first..q_last (inner) with
+    their times (`_piece_times`), the rest cells' durations rest_t (2,), lengths rest_h (2,),
+    far values b_far (2,) (at a moving end, rest_h = 0 and b_far its b); s_nodes: the nodes'
+    arc, cell_node: each cell's first node, node0 and node1: the stretch's ends. The first
+    instant is the start and the last the end (at their own speed). Within a cell each
+    instant is found by Newton's method from the last one, safeguarded by bisection."""
     total = rest_t[0] + rest_t[1]
     for q in range(q_first, q_last + 1):
         total += times[q]
-    step = total / n
+    n = instants.size - 1
     s_start = s_nodes[node0]
     s_end = s_nodes[node1]
     pieces = np.empty(PIECES)
@@ -89,17 +91,19 @@ def _sample_stretch(c, cells, cell_node, q_first, q_last, s_nodes, node0, node1,
     t_cell = rest_t[0]  # the schedule time at which cell q starts
     x_last = 0.0  # the share of cell q of the last instant found there
     for k in range(n + 1):
-        t = k * step
-        if k == 0 or k == n:
-            out_s[k] = s_start if k == 0 else s_end
-            out_v[k] = 0.0
+        t = instants[k]
+        if k == 0 or k == n or t >= total:
+            end = 0 if k == 0 else 1
+            out_s[k] = s_start if end == 0 else s_end
+            out_v[k] = math.sqrt(b_far[end]) / scale if rest_h[end] == 0.0 else 0.0
             continue
-        if t <= rest_t[0]:  # the rest cell at the start: y = (t sqrt(b) / (3 h))^3
+        # the rest cell at the start: y = (t sqrt(b) / (3 h))^3
+        if rest_h[0] > 0.0 and t <= rest_t[0]:
             y = (t * math.sqrt(b_far[0]) / (3.0 * rest_h[0])) ** 3
             out_s[k] = s_start + rest_h[0] * y
             out_v[k] = math.sqrt(b_far[0] * y ** (4.0 / 3.0)) / scale
             continue
-        if t >= total - rest_t[1]:  # the rest cell at the end
+        if rest_h[1] > 0.0 and t >= total - rest_t[1]:  # the rest cell at the end
             y = ((total - t) * math.sqrt(b_far[1]) / (3.0 * rest_h[1])) ** 3
             out_s[k] = s_end - rest_h[1] * y
             out_v[k] = math.sqrt(b_far[1] * y ** (4.0 / 3.0)) / scale
@@ -141,6 +145,29 @@ def _law_times(c, cells, times):
         times[q] = pieces.sum()
 
 
+def law_instants(duration: float, period_s: float, slowdown: float, open_start: bool,
+                 open_end: bool) -> tuple[np.ndarray, float]:
+    """A stretch's law instants (n + 1,) from 0 and the time scale (law time over schedule
+    time): whole periods, its duration stretched to the next whole one (module docstring). A
+    moving end keeps its speed, so a stretch that has one is not stretched (nor slowed:
+    path_plan refuses a slowdown there): where it ends moving, its last instant is its end (a
+    share of a period); where it starts moving and ends at rest, it holds the rest up to the
+    next whole period (a piece of its own: no motion in it)."""
+    if not (open_start or open_end):
+        n = max(2, math.ceil(duration * slowdown / period_s * (1.0 - 1e-12)))
+        return np.arange(n + 1) * period_s, n * period_s / duration
+    n = max(1, math.ceil(duration / period_s * (1.0 - 1e-12)))
+    law_t = np.arange(n + 1) * period_s
+    if open_end:
+        # a last share far below a period joins the period before it
+        if n > 1 and duration - (n - 1) * period_s < MIN_SHARE * period_s:
+            law_t = law_t[:-1]
+        law_t[-1] = duration
+    elif law_t[-1] - duration > MIN_SHARE * period_s:
+        law_t = np.concatenate([law_t[:-1], [duration], law_t[-1:]])
+    return law_t, 1.0
+
+
 def schedule_law(schedule: Schedule, period_s: float, extra_slowdown: float = 1.0
                  ) -> tuple[TimeLaw, np.ndarray]:
     """The law (module docstring), and the time (R,) it passes each rest."""
@@ -159,23 +186,29 @@ def schedule_law(schedule: Schedule, period_s: float, extra_slowdown: float = 1.
         q1 = q0 + n_cells - 1
         rest_t = times[q_n + 2 * s:q_n + 2 * s + 2].copy()
         duration = float(rest_t.sum() + times[q0:q1 + 1].sum())
-        n = max(2, math.ceil(duration * slow / period_s * (1.0 - 1e-12)))
-        scale = n * period_s / duration
+        law_t, scale = law_instants(duration, period_s, slow, lay.is_open(s, 0),
+                                    lay.is_open(s, 1))
+        instants = np.minimum(law_t / scale, duration)
+        n = law_t.size - 1
         s_k = np.empty(n + 1)
         v_k = np.empty(n + 1)
         b_far = np.array([schedule.c[lay.first[s]], schedule.c[lay.last[s]]])
         _sample_stretch(schedule.c, lay.cells, lay.cell_node, q0, q1, lay.s_mm, rests[s],
-                        rests[s + 1], times, rest_t, lay.rest_h[s].copy(), b_far, scale, n,
-                        s_k, v_k)
+                        rests[s + 1], times, rest_t, lay.rest_h[s].copy(), b_far, scale,
+                        instants, s_k, v_k)
+        if not lay.is_open(s, 1):  # the rest held (the sampler's sum of times may round below)
+            done = instants >= duration
+            s_k[done], v_k[done] = lay.s_mm[rests[s + 1]], 0.0
         s_k = np.maximum.accumulate(s_k)
         gain = np.diff(s_k)
-        c2 = (3.0 * gain - period_s * (2.0 * v_k[:-1] + v_k[1:])) / period_s**2
-        c3 = (-2.0 * gain + period_s * (v_k[:-1] + v_k[1:])) / period_s**3
+        dt = np.diff(law_t)
+        c2 = (3.0 * gain - dt * (2.0 * v_k[:-1] + v_k[1:])) / dt**2
+        c3 = (-2.0 * gain + dt * (v_k[:-1] + v_k[1:])) / dt**3
         start = key_t[-1]
-        t0 = start + np.arange(n) * period_s
+        t0 = start + law_t[:-1]
         for out, value in zip(parts, (t0, s_k[:-1], v_k[:-1], 2.0 * c2, 6.0 * c3)):
             out.append(value)
-        key_t.append(start + n * period_s)
+        key_t.append(start + float(law_t[-1]))
         q0 = q1 + 1
     key = np.array(key_t)
     t0, s0, v0, a0, jerk = (np.concatenate(p) for p in parts)

@@ -1,0 +1,239 @@
+"""The schedule's nodes (design §2e): where the cells of planning.cells begin and end along one
+curve, the speed estimate that sizes them, and the cuts where a schedule needs finer ones.
+
+Nodes: the planning grid's (samples at most two full-speed steps apart, curvature peaks,
+knots where kappa jumps, stops), then beside each rest at h, 2h, 4h ... (h from how fast
+constant jerk leaves a rest), then every cell in which the pointwise speed limit would spend
+more than CELL_PERIODS periods cut into pieces that do not: no motion is faster than that
+limit, so no cell lasts longer.
+A chain that starts or ends moving (basis.ChainEnds) has no rest cell at that end and no nodes
+beside it but one near enough that the state's slope cannot take b to 0 in the first cell;
+where the plan the state comes from overlaps this one, its nodes are this one's there (`seed_s`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from nurbsfeed.geometry.nurbs import NurbsCurve
+from nurbsfeed.jit import jit
+from nurbsfeed.planning.basis import AT_REST, ChainEnds
+from nurbsfeed.planning.cells import Layout
+from nurbsfeed.planning.grid import Grid
+from nurbsfeed.planning.limits import Limits
+from nurbsfeed.planning.path_check import arc_parameters
+
+CELL_PERIODS = 4.0  # a cell lasting longer at the speed estimate is cut
+RECUT_SLACK = 2.0  # ... and one the schedule spends over this many times as long in, again
+MAX_CUT = 64  # pieces a cell is cut into at most in one go
+# a grid node closer than this many periods at the speed estimate to the last one kept goes
+# (curvature maxima, knots, stops and the ends always stay): cells far shorter than a period
+# are finer than anything the machine's positions show, they make rows that ask b'' to
+# follow 2 kappa^2 b to a millionth (a 3 um near cusp), beyond what the programs resolve, and
+# each costs the programs as much as a long one
+MIN_CELL_PERIODS = 1.0
+# ... unless the curvature across the merged cell changes by more than this factor (kappa
+# below kappa_0, where it sets no limit, counts as kappa_0): in a valley the rows must see the
+# curvature change to plan its bottom
+MERGE_KAPPA_RATIO = 1.25
+MIN_CELL_REL = 1e-6  # of the curve's length: nodes closer than this are one
+MIN_STRETCH_CELLS = 4  # a stretch between rests has at least this many cells
+REST_CELL_SHARE = 0.05  # of A^3 / (6 J^2): the first cell beside a rest at most ...
+REST_CELLS_PER_STRETCH = 32  # ... and at most this share of half its stretch
+
+
+def speed_estimate(s_mm: np.ndarray, cap_mm_s: np.ndarray, acc_mm_s2: float,
+                   rest: np.ndarray, ends: ChainEnds = AT_REST) -> np.ndarray:
+    """The fastest speed (N,) at the points s_mm (N,) under the caps cap_mm_s (N,) and one
+    acceleration limit, at rest where rest (N,) but at a moving end (`ends`, its speed): the
+    forward and backward passes of time-optimal path parametrisation, b' <= 2 A. No motion
+    that keeps the limits is faster (jerk only slows it), which sizes the cells."""
+    b = np.where(rest, 0.0, np.minimum(cap_mm_s, 1e300) ** 2)
+    for i, state in ((0, ends.start), (-1, ends.end)):
+        if state is not None:
+            b[i] = state.b
+    _topp_passes(b, np.diff(s_mm), 2.0 * acc_mm_s2)
+    return np.sqrt(b)
+
+
+@jit
+def _topp_passes(b, h, slope):
+    for i in range(1, b.size):
+        b[i] = min(b[i], b[i - 1] + slope * h[i - 1])
+    for i in range(b.size - 2, -1, -1):
+        b[i] = min(b[i], b[i + 1] + slope * h[i])
+
+
+def schedule_nodes(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.ndarray,
+                   cap_mm_s: np.ndarray, kappa_floor: float,
+                   keep_u: np.ndarray = np.empty(0), max_nodes: int = 2**62,
+                   ends: ChainEnds = AT_REST, seed_s: np.ndarray = np.empty(0)
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """The nodes (s_mm, u, rest) (M,) of the schedule from the grid's, resting at grid nodes
+    rest_nodes (R,) (the ends first and last); cap_mm_s (N,): the speed caps at the grid's
+    nodes; kappa_floor: the curvature below which the caps do not depend on it (kappa_0);
+    keep_u: parameters whose nodes stay (where the programmed feed changes) (module docstring);
+    ends: a moving end has no rest cell, so none of the nodes beside a rest, but one close
+    enough that the state's slope cannot take b to 0 within the first cell (`_open_end_nodes`);
+    seed_s: nodes (ascending) that replace every node between the first and the last of them
+    (the nodes of the plan a moving end's state comes from, where the two overlap).
+    Also the speed estimate (M,) at the nodes (`speed_estimate`). None past max_nodes nodes."""
+    s_mm, u = np.asarray(grid.s_mm, dtype=float), np.asarray(grid.u, dtype=float)
+    rest = np.zeros(s_mm.size, dtype=bool)
+    rest[rest_nodes] = True
+    v_limit = speed_estimate(s_mm, np.asarray(cap_mm_s, dtype=float),
+                             _moving_limits(curve, lim)[0], rest, ends)
+    v_limit = np.maximum(v_limit, np.where(rest, 0.0, 1e-300))
+    essential = rest.copy()
+    essential[grid.peak_index] = True
+    essential[np.isin(u, curve.span_breaks)] = True
+    essential[np.isin(u, keep_u)] = True
+    floor = MIN_CELL_REL * max(float(s_mm[-1]), 1e-300)
+    short = np.maximum(MIN_CELL_PERIODS * lim.period_s * np.asarray(v_limit, dtype=float), floor)
+    kappa = np.maximum(np.nan_to_num(grid.kappa_1_mm, posinf=1e300), kappa_floor)
+    keep = np.ones(s_mm.size, dtype=bool)
+    kept = 0
+    lo_k = hi_k = kappa[0]
+    for k in range(1, s_mm.size):
+        gap = s_mm[k] - s_mm[kept]
+        lo_k, hi_k = min(lo_k, kappa[k]), max(hi_k, kappa[k])
+        if gap >= floor and (essential[k] or gap >= min(short[k], short[kept])
+                             or hi_k > MERGE_KAPPA_RATIO * lo_k):
+            kept = k
+            lo_k = hi_k = kappa[k]
+        elif (k == s_mm.size - 1 or rest[k]) and kept > 0 and not rest[kept]:
+            keep[kept] = False  # a rest and the end stay: the node before them goes
+            kept = k
+        else:
+            keep[k] = False
+    s_mm, u, rest, v = s_mm[keep], u[keep], rest[keep], np.asarray(v_limit, dtype=float)[keep]
+    rests = np.flatnonzero(rest)
+    extra = [np.linspace(s_mm[a], s_mm[b], MIN_STRETCH_CELLS + 1)[1:-1]
+             for a, b in zip(rests[:-1], rests[1:]) if b - a < MIN_STRETCH_CELLS]
+    acc, jerk = _moving_limits(curve, lim)
+    first_h = REST_CELL_SHARE * acc**3 / (6.0 * jerk**2)
+    doubling = 2.0 ** np.arange(64)
+    last_stretch = rests.size - 2
+    for stretch, (a, b) in enumerate(zip(rests[:-1], rests[1:])):
+        half = (s_mm[b] - s_mm[a]) / 2
+        # each end's nodes within its own first interval: where the other end's is short, the
+        # long one would keep no node and the profile creep up over all of it
+        for at, side, inner in ((a, 1.0, a + 1), (b, -1.0, b - 1)):
+            step = abs(s_mm[inner] - s_mm[at])
+            state = (ends.start if stretch == 0 and side > 0 else
+                     ends.end if stretch == last_stretch and side < 0 else None)
+            if state is not None:
+                extra.append(_open_end_nodes(s_mm[at], side, step, state, floor))
+                continue
+            # constant jerk from rest reaches the limit beside it after (2 v)^1.5 / (6 sqrt J)
+            reach = (2.0 * v[inner]) ** 1.5 / (6.0 * math.sqrt(jerk))
+            near = min(first_h, half / REST_CELLS_PER_STRETCH, reach) * doubling
+            near = near[(near < min(half / 2, step)) & (near >= floor)]
+            extra.append(s_mm[at] + side * near)
+    s_mm, u, rest, v = _insert(curve, grid, s_mm, u, rest, v, extra)
+    # cells in which even the limit spends more than CELL_PERIODS periods are cut
+    h = np.diff(s_mm)
+    speed = np.maximum(np.minimum(v[:-1], v[1:]), 1e-300)
+    parts = np.ceil(h / (CELL_PERIODS * lim.period_s * speed))
+    closed = rest.copy()  # the rests with a rest cell beside them
+    closed[[0, -1]] &= ~np.array(ends.moving)
+    long = (parts > 1.0) & ~closed[:-1] & ~closed[1:]
+    if s_mm.size + np.sum(parts[long] - 1.0) > max_nodes:
+        return None
+    if long.any():
+        cut = [s_mm[i] + h[i] * np.arange(1, n) / n
+               for i, n in zip(np.flatnonzero(long), parts[long].astype(np.int64))]
+        s_mm, u, rest, v = _insert(curve, grid, s_mm, u, rest, v, cut)
+    if seed_s.size:
+        s_mm, u, rest, v = _seeded(curve, grid, s_mm, u, rest, v, seed_s, floor)
+    # the estimate again on the nodes (inserted ones took theirs by interpolation)
+    cap = np.interp(s_mm, grid.s_mm, np.asarray(cap_mm_s, dtype=float))
+    return s_mm, u, rest, speed_estimate(s_mm, cap, _moving_limits(curve, lim)[0], rest, ends)
+
+
+def _seeded(curve: NurbsCurve, grid: Grid, s_mm: np.ndarray, u: np.ndarray, rest: np.ndarray,
+            v: np.ndarray, seed_s: np.ndarray, floor: float) -> tuple[np.ndarray, ...]:
+    """The nodes with those strictly between seed_s's first and last (rests aside) replaced
+    by seed_s (within floor of a node kept: that node)."""
+    lo, hi = float(seed_s[0]), float(seed_s[-1])
+    keep = (s_mm < lo - floor) | (s_mm > hi + floor) | rest
+    s_mm, u, rest, v = s_mm[keep], u[keep], rest[keep], v[keep]
+    at = np.clip(np.searchsorted(s_mm, seed_s), 1, s_mm.size - 1)
+    far = np.minimum(np.abs(seed_s - s_mm[at - 1]), np.abs(s_mm[at] - seed_s)) >= floor
+    more = seed_s[far]
+    order = np.argsort(np.concatenate([s_mm, more]), kind="stable")
+    return (np.concatenate([s_mm, more])[order],
+            np.concatenate([u, arc_parameters(curve, grid, more)])[order],
+            np.concatenate([rest, np.zeros(more.size, dtype=bool)])[order],
+            np.concatenate([v, np.interp(more, s_mm, v)])[order])
+
+
+def _open_end_nodes(s_end: float, side: float, step: float, state, floor: float) -> np.ndarray:
+    """A node beside a moving end where its slope would take b from the end's b to half of it
+    (b' towards the inside, side = +1 at the start, -1 at the end) within the first cell: the
+    spline's second coefficient there is b + g b' (g half the cell), which must stay > 0."""
+    slope = side * state.db_ds
+    if slope >= 0.0:
+        return np.empty(0)
+    reach = 0.5 * state.b / -slope
+    if not floor <= reach < step:
+        return np.empty(0)
+    return np.array([s_end + side * reach])
+
+
+def cut_cells(curve: NurbsCurve, grid: Grid, lim: Limits, layout: Layout, times: np.ndarray,
+              broken: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """The nodes of `layout` with each inner cell whose schedule spends times[q] (Q,) over
+    CELL_PERIODS * RECUT_SLACK periods in it cut into pieces of CELL_PERIODS (the estimate
+    sized them without jerk, which slows the motion in tight turns far below it), and each
+    whose schedule breaks a limit BETWEEN its points (broken (Q,)) cut in two at least; and
+    the speed estimate then. None where no cell is either."""
+    parts = np.maximum(np.ceil(times / (CELL_PERIODS * lim.period_s)), np.where(broken, 2, 1))
+    long = np.flatnonzero((times > CELL_PERIODS * RECUT_SLACK * lim.period_s) | broken)
+    if long.size == 0:
+        return None
+    s_mm, node = layout.s_mm, layout.cell_node
+    h = s_mm[node[long] + 1] - s_mm[node[long]]
+    cut = [s_mm[i] + hq * np.arange(1, n) / n
+           for i, hq, n in zip(node[long], h, np.minimum(parts[long], MAX_CUT).astype(np.int64))]
+    v = np.sqrt(np.interp(s_mm, layout.xi, layout.b_estimate))
+    s_mm, u, rest, v = _insert(curve, grid, s_mm, layout.u, layout.rest, v, cut)
+    return s_mm, u, rest, v
+
+
+def _insert(curve: NurbsCurve, grid: Grid, s_mm: np.ndarray, u: np.ndarray, rest: np.ndarray,
+            v: np.ndarray, extra: list[np.ndarray]) -> tuple[np.ndarray, ...]:
+    """The nodes with those at arc lengths `extra` added (their u from the grid), but those
+    within MIN_CELL_REL of the curve's length from a node or from one added before them: a
+    cell of a rounding's length has a b'' its rows cannot hold."""
+    if not extra:
+        return s_mm, u, rest, v
+    floor = MIN_CELL_REL * max(float(s_mm[-1]), 1e-300)
+    more = np.unique(np.concatenate(extra))
+    at = np.clip(np.searchsorted(s_mm, more), 1, s_mm.size - 1)
+    near = np.minimum(np.abs(more - s_mm[at - 1]), np.abs(s_mm[at] - more))
+    more = more[near >= floor]
+    if more.size > 1:
+        more = more[np.concatenate(([True], np.diff(more) >= floor))]
+    if more.size == 0:
+        return s_mm, u, rest, v
+    order = np.argsort(np.concatenate([s_mm, more]), kind="stable")
+    u_more = arc_parameters(curve, grid, more)
+    v_more = np.interp(more, s_mm, v)
+    return (np.concatenate([s_mm, more])[order], np.concatenate([u, u_more])[order],
+            np.concatenate([rest, np.zeros(more.size, dtype=bool)])[order],
+            np.concatenate([v, v_more])[order])
+
+
+def _moving_limits(curve: NurbsCurve, lim: Limits) -> tuple[float, float]:
+    """The least acceleration and jerk limit among the tangential ones and those of the axes the
+    curve moves (a still axis's limits shape no start)."""
+    moving = np.ptp(curve.points, axis=0) > 0.0
+    acc = min([lim.acc_mm_s2] + [a for a, m in zip(lim.axis_acc_mm_s2, moving)
+                                 if m and math.isfinite(a)])
+    jerk = min([lim.jerk_mm_s3] + [j for j, m in zip(lim.axis_jerk_mm_s3, moving)
+                                   if m and math.isfinite(j)])
+    return acc, jerk
