@@ -293,3 +293,25 @@ def test_a_foot_behind_the_walk_gets_the_foot_past_the_turn_back() -> None:
     other = feet_ahead_of_behind(curve, targets, u, np.full(3, np.nan), 1e-9)
     assert np.isnan(other[:2]).all()
     assert other[2] == pytest.approx(0.6, abs=1e-9)
+
+
+REVERSAL = ROOT / "tests" / "data" / "stepping-stops" / "reversal-before-corner.nc"
+
+
+def test_a_reversal_between_a_corner_knot_and_the_sample_before_it_is_a_rest(
+        tmp_path: Path) -> None:
+    """Fuzz seed 61 (gcode-6100206-129): a quadratic runs from y = 3 down to 0.0375 and back up
+    to the corner at u = 1/6 (y(t) = 3 (1 - t)^2 + 0.038 t^2, C' = 0 at t = 3 / 3.038), half a
+    micrometre before the corner and inside the last grid interval before it: no sample saw the
+    tangent turn back, the motion reversed at speed (7e5 mm/s^3 from the points under either
+    planner) and the motion guard refused the valid program. The curve now arrives at the knot
+    against the chord from the sample before it, the reversal between them is found and rested
+    at, and the program converts within every limit."""
+    [block] = [item.in_mm() for item in read_program(REVERSAL, "auto")
+               if isinstance(item, CurveBlock)][:1]
+    plan = plan_block(block, load_machine("default"))
+    reversal = 3.0 / 3.038 / 6.0
+    assert np.min(np.abs(plan.key_u - reversal)) < 1e-9
+    assert np.any(np.abs(plan.key_u - 1.0 / 6.0) < 1e-12)  # the corner stays a rest too
+    outcome = check_case(tmp_path, "in.nc", REVERSAL.read_bytes())
+    assert outcome.problem is None, outcome.problem

@@ -252,8 +252,8 @@ def find_stops(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed, 
     curve has such a candidate), nor is the sorting: numba compiles a quicksort and a binary
     search of its own for each array type, seconds of the first run for a few values.
     """
-    found_u, minima, turns = _stop_candidates(knots, coef, degree, breaks, u, speed, pts,
-                                              tangent, zero_speed, mean_speed, floor_mm)
+    found_u, minima, turns, back = _stop_candidates(knots, coef, degree, breaks, u, speed, pts,
+                                                    tangent, zero_speed, mean_speed, floor_mm)
     found, near = list(found_u), []
     near_speed = ZERO_CANDIDATE_REL * mean_speed
     for q in minima:
@@ -283,6 +283,18 @@ def find_stops(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed, 
             found.append(at)
         elif at_speed <= near_speed:  # not a corner's flip of the tangent
             near.append(at)
+    for low, high in back:
+        # C' along the chord's start changes sign inside: bisect it, then refine
+        n_ctrl = coef.shape[0]
+        span = find_span(knots, degree, n_ctrl, low, degree)
+        _, _, _, tx, ty, tz = point_d1(knots, coef, degree, span, low)
+        if high > low and not (tx == 0.0 and ty == 0.0 and tz == 0.0):
+            start = _turn_back(knots, coef, degree, tx, ty, tz, low, high)
+            at, at_speed = _refine_zero(knots, coef, degree, start, low, high)
+            if at_speed <= zero_speed:
+                found.append(at)
+            elif at_speed <= near_speed:
+                near.append(at)
     zeros, near = np.sort(np.array(found, dtype=float)), np.sort(np.array(near, dtype=float))
     n = zeros.size
     n_near = near.size
@@ -371,6 +383,11 @@ def _stop_candidates(knots, coef, degree, breaks, u, speed, pts, tangent, zero_s
         turns[n_turns] = q
         n_turns += 1
     span = degree
+    # a reversal between a knot and the sample beside it (C' falls through 0 in the span
+    # there): the curve arrives at the knot (leaves it) against the chord from (to) that sample
+    back = np.empty((2 * breaks.size, 2))
+    n_back = 0
+    q = 0
     for b in range(1, breaks.size - 1):
         knot = breaks[b]
         span = find_span(knots, degree, n_ctrl, knot, span)  # the span starting at the knot
@@ -379,4 +396,23 @@ def _stop_candidates(knots, coef, degree, breaks, u, speed, pts, tangent, zero_s
                 or _speed_on_span(knots, coef, degree, span, knot) <= zero_speed):
             found[n] = knot
             n += 1
-    return found[:n], minima[:n_minima], turns[:n_turns]
+            continue
+        while q + 1 < u.size and u[q + 1] < knot:
+            q += 1  # u[q] < knot <= u[q + 1]
+        for side in range(2):
+            at = q if side == 0 else q + 1
+            while side == 1 and at < last and u[at] <= knot:
+                at += 1
+            if (u[at] >= knot) if side == 0 else (u[at] <= knot):
+                continue
+            px, py, pz, dx, dy, dz = point_d1(knots, coef, degree,
+                                              before if side == 0 else span, knot)
+            sign = 1.0 if side == 0 else -1.0  # chord in the direction of travel
+            cx, cy, cz = (px - pts[at, 0]) * sign, (py - pts[at, 1]) * sign, (
+                pz - pts[at, 2]) * sign
+            norm = math.sqrt(dx * dx + dy * dy + dz * dz)
+            if dx * cx + dy * cy + dz * cz < -floor_mm * norm:
+                back[n_back, 0] = u[at] if side == 0 else knot
+                back[n_back, 1] = knot if side == 0 else u[at]
+                n_back += 1
+    return found[:n], minima[:n_minima], turns[:n_turns], back[:n_back]
