@@ -26,7 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 DEFAULT = load_machine("default")
 PAPER_PATH = load_machine("paper-table1", {"jerk_model": "path", "planner": "optimal"})
 NONE = np.empty(0)
-# the two parts' cycles over the whole's (measured: 0.9995-1.0004): each part is planned on
+# the two parts' cycles over the whole's (measured: 0.9996-1.0002): each part is planned on
 # nodes of its own, so neither is the whole's restriction exactly
 CYCLE_REL = 0.005
 
