@@ -315,3 +315,25 @@ def test_a_reversal_between_a_corner_knot_and_the_sample_before_it_is_a_rest(
     assert np.any(np.abs(plan.key_u - 1.0 / 6.0) < 1e-12)  # the corner stays a rest too
     outcome = check_case(tmp_path, "in.nc", REVERSAL.read_bytes())
     assert outcome.problem is None, outcome.problem
+
+
+CUSP_KNOT = ROOT / "tests" / "data" / "stepping-stops" / "reversal-after-cusp-knot.ngc"
+
+
+def test_a_reversal_just_after_a_knot_where_c_prime_vanishes_is_a_rest(tmp_path: Path) -> None:
+    """Fuzz seed 62 (gcode-6200189-377): a quartic along the Y axis stops at its knot u = 0.5
+    (C' = 0 there, a cusp), leaves it towards -Y and turns back 0.15 um later, at u = 0.51338,
+    inside the grid interval after the knot; the knot's own zero was taken and the interval
+    beside it not looked at, so the motion reversed at speed (4e5 mm/s^3 from the points) and
+    the guard refused the valid program. The way the curve leaves a zero at a knot is now read
+    from a chord 1e-6 of the span long, and the reversal after it is found and rested at."""
+    blocks = [item.in_mm() for item in read_program(CUSP_KNOT, "auto")
+              if isinstance(item, CurveBlock)]
+    plan = plan_block(blocks[1], load_machine("default"))
+    _, d1, _ = blocks[1].curve.derivatives(np.linspace(0.505, 0.52, 1501))
+    turn = np.linspace(0.505, 0.52, 1501)[np.flatnonzero(np.diff(np.sign(d1[:, 1])))]
+    assert turn.size == 1  # C'_y changes sign once there: the reversal (C'_x = C'_z = 0)
+    assert np.min(np.abs(plan.key_u - turn[0])) < 2e-5
+    assert np.any(plan.key_u == 0.5)
+    outcome = check_case(tmp_path, "in.ngc", CUSP_KNOT.read_bytes())
+    assert outcome.problem is None, outcome.problem

@@ -19,6 +19,7 @@ CORNER_PROBE_REL = 1e-9  # of the parameter range: how far beside the knot the t
 ZERO_CANDIDATE_REL = 0.05  # a local minimum of |C'| on the samples below this of the mean
 ZERO_ITERATIONS = 60  # Gauss-Newton steps towards a minimum of |C'|^2 (linear at a double zero)
 TANGENT_PROBE_REL = 1e-4  # of the span's width: where the chords beside a zero end ...
+PROBE_REL = 1e-6  # of a span's width: where the way out of a zero of C' at a knot is read
 KAPPA_BOUNDED_REL = 0.25  # kappa beside a zero changing by more than this over 16x: unbounded
 
 
@@ -70,6 +71,27 @@ def _kappa_or_nan(knots, coef, degree, u, zero_speed):
     c = point_d2(knots, coef, degree, span, u)
     kappa, speed = curvature(c[3], c[4], c[5], c[6], c[7], c[8])
     return kappa if speed > zero_speed else math.nan
+
+
+@jit
+def _probe_direction(knots, coef, degree, u0, side, width):
+    """The unit direction of travel into (side -1) or out of (side +1) a point u0 where C'
+    vanishes: the chord to C(u0 + side h), h = PROBE_REL of the span's width and up to a
+    thousand times that while the chord has no length (0 if it never has)."""
+    n_ctrl = coef.shape[0]
+    span = find_span(knots, degree, n_ctrl, u0, degree)
+    px, py, pz, _, _, _ = point_d1(knots, coef, degree, span, u0)
+    h = PROBE_REL * width
+    for _ in range(4):
+        u = u0 + side * h
+        span = find_span(knots, degree, n_ctrl, u, span)
+        qx, qy, qz, _, _, _ = point_d1(knots, coef, degree, span, u)
+        dx, dy, dz = side * (qx - px), side * (qy - py), side * (qz - pz)
+        length = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if length > 0.0:
+            return dx / length, dy / length, dz / length
+        h *= 10.0
+    return 0.0, 0.0, 0.0
 
 
 @jit
@@ -283,11 +305,8 @@ def find_stops(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed, 
             found.append(at)
         elif at_speed <= near_speed:  # not a corner's flip of the tangent
             near.append(at)
-    for low, high in back:
-        # C' along the chord's start changes sign inside: bisect it, then refine
-        n_ctrl = coef.shape[0]
-        span = find_span(knots, degree, n_ctrl, low, degree)
-        _, _, _, tx, ty, tz = point_d1(knots, coef, degree, span, low)
+    for low, high, tx, ty, tz in back:
+        # C' along the way the curve goes at low changes sign inside: bisect it, then refine
         if high > low and not (tx == 0.0 and ty == 0.0 and tz == 0.0):
             start = _turn_back(knots, coef, degree, tx, ty, tz, low, high)
             at, at_speed = _refine_zero(knots, coef, degree, start, low, high)
@@ -384,8 +403,9 @@ def _stop_candidates(knots, coef, degree, breaks, u, speed, pts, tangent, zero_s
         n_turns += 1
     span = degree
     # a reversal between a knot and the sample beside it (C' falls through 0 in the span
-    # there): the curve arrives at the knot (leaves it) against the chord from (to) that sample
-    back = np.empty((2 * breaks.size, 2))
+    # there): the curve arrives at the knot (leaves it) against the chord from (to) that sample;
+    # (low, high) and the direction C' keeps at low (positive along it), C' negative at high
+    back = np.empty((2 * breaks.size, 5))
     n_back = 0
     q = 0
     for b in range(1, breaks.size - 1):
@@ -395,8 +415,7 @@ def _stop_candidates(knots, coef, degree, breaks, u, speed, pts, tangent, zero_s
         if (_speed_on_span(knots, coef, degree, before, knot) <= zero_speed
                 or _speed_on_span(knots, coef, degree, span, knot) <= zero_speed):
             found[n] = knot
-            n += 1
-            continue
+            n += 1  # (a zero at the knot, and perhaps a reversal beside it too)
         while q + 1 < u.size and u[q + 1] < knot:
             q += 1  # u[q] < knot <= u[q + 1]
         for side in range(2):
@@ -407,12 +426,21 @@ def _stop_candidates(knots, coef, degree, breaks, u, speed, pts, tangent, zero_s
                 continue
             px, py, pz, dx, dy, dz = point_d1(knots, coef, degree,
                                               before if side == 0 else span, knot)
+            norm = math.sqrt(dx * dx + dy * dy + dz * dz)
+            if norm <= zero_speed:  # C' = 0 at the knot: the way the curve arrives or leaves
+                width = knot - breaks[b - 1] if side == 0 else breaks[b + 1] - knot
+                dx, dy, dz = _probe_direction(knots, coef, degree, knot, 2 * side - 1, width)
+                norm = math.sqrt(dx * dx + dy * dy + dz * dz)
             sign = 1.0 if side == 0 else -1.0  # chord in the direction of travel
             cx, cy, cz = (px - pts[at, 0]) * sign, (py - pts[at, 1]) * sign, (
                 pz - pts[at, 2]) * sign
-            norm = math.sqrt(dx * dx + dy * dy + dz * dz)
-            if dx * cx + dy * cy + dz * cz < -floor_mm * norm:
+            if norm > 0.0 and dx * cx + dy * cy + dz * cz < -floor_mm * norm:
+                if side == 0:  # C' at the sample before is the way it goes at low
+                    tx, ty, tz = tangent[at, 0], tangent[at, 1], tangent[at, 2]
+                else:
+                    tx, ty, tz = dx / norm, dy / norm, dz / norm
                 back[n_back, 0] = u[at] if side == 0 else knot
                 back[n_back, 1] = knot if side == 0 else u[at]
+                back[n_back, 2], back[n_back, 3], back[n_back, 4] = tx, ty, tz
                 n_back += 1
     return found[:n], minima[:n_minima], turns[:n_turns], back[:n_back]
