@@ -138,8 +138,8 @@ def layout_and_schedule(curve: NurbsCurve, lim):
     made = {}
     original = path_plan.plan_schedule
 
-    def keep(layout, lim_, start=None, seed=None):
-        made["schedule"] = original(layout, lim_, start, seed)
+    def keep(layout, lim_, *args):
+        made["schedule"] = original(layout, lim_, *args)
         return made["schedule"]
 
     path_plan.plan_schedule = keep

@@ -162,6 +162,30 @@ def insert_knot(degree: int, knots: np.ndarray, pw: np.ndarray, u: float
     return np.insert(knots, k + 1, u), out
 
 
+def curve_after(curve: NurbsCurve, u: float) -> NurbsCurve:
+    """The part of `curve` after its parameter u (u_min < u < u_max): u inserted until its
+    multiplicity is the degree (the curve then passes through one control point there, and the
+    spans after it use only the points from it on), the spans before it dropped. The same path
+    from C(u) on; its parameter the curve's own over [u, u_max] (kept as u_origin, u_scale, so
+    that a trace names the input's u)."""
+    p = curve.degree
+    knots, pw = curve.knots.copy(), curve.homogeneous.copy()
+    while np.count_nonzero(knots == u) < p:
+        knots, pw = insert_knot(p, knots, pw, u)
+    first = int(np.searchsorted(knots, u, side="left"))  # the first copy of u
+    tail_knots = np.concatenate([[u], knots[first:]])
+    tail = pw[first - 1:]
+    span = float(tail_knots[-1] - u)
+    unit = (tail_knots - u) / span
+    unit[:p + 1], unit[-p - 1:] = 0.0, 1.0
+    weights = tail[:, 3] * 2.0 ** -np.floor(np.log2(tail[:, 3].max()))
+    points = tail[:, :3] / tail[:, 3:]
+    for arr in (unit, points, weights):
+        arr.setflags(write=False)
+    return NurbsCurve(p, unit, points, weights, curve.name, float(curve.input_u(u)),
+                      curve.u_scale * span)
+
+
 def elevate(curve: NurbsCurve, degree: int) -> NurbsCurve:
     """The same curve of a higher `degree` (design §3b: a chain's pieces share one degree): cut
     into Bézier spans by knot insertion, each span raised one degree at a time (Q_i = i/(p+1)

@@ -40,6 +40,13 @@ RECUTS_MOVING = 5
 # slowed: past this slowdown it is not planned; below it (the programs' rounding: their rows
 # hold to 1e-7 of their bounds) the stretch at the moving end is not slowed (schedule_law)
 OPEN_SLOWDOWN_REL = 1e-6
+# A chain that starts moving starts as the last window's points moved, which lie off that
+# window's law by its stepping's drift (micrometres, interpolate.landing): where that window
+# was braking at its limits, no schedule from the state it hands on may keep them exactly. It
+# is planned again with every limit within START_SLACK_MM (the distance it may take to
+# brake, `start_slack_mm`) of its start loosened by START_SLACK_REL, what the conversion's look
+# at the points allows any plan (pipeline.POSITION_REL), rather than coming to rest.
+START_SLACK_REL = 0.005
 
 
 @dataclass(frozen=True, eq=False)
@@ -55,6 +62,13 @@ class PathSchedule:
     rest_nodes: np.ndarray
     kinds: np.ndarray
     schedule: Schedule
+
+
+def start_slack_mm(lim: Limits) -> float:
+    """How far from a moving start its limits may be loosened: the distance braking from the
+    feed takes at most, v (v / A + A / J)."""
+    v = lim.feed_mm_s
+    return v * (v / lim.acc_mm_s2 + lim.acc_mm_s2 / lim.jerk_mm_s3)
 
 
 def rest_nodes(grid: Grid, limit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -112,7 +126,11 @@ def plan_path(curve: NurbsCurve, grid: Grid, lim: Limits, limit: np.ndarray, cap
         return None
     s_mm, u, rest, v_estimate = nodes
     layout = build_layout(curve, grid, lim, s_mm, u, rest, v_estimate, feed_at_u, ends)
+    slack = (0.0, 0.0)
     schedule = plan_schedule(layout, lim, None, None if seed is None else seed[1:])
+    if not schedule.solved and moving[0]:
+        slack = (START_SLACK_REL, start_slack_mm(lim))
+        schedule = plan_schedule(layout, lim, None, None if seed is None else seed[1:], slack)
     if not schedule.solved:
         return None
     for _ in range(RECUTS_MOVING if moving.any() else RECUTS):
@@ -125,7 +143,8 @@ def plan_path(curve: NurbsCurve, grid: Grid, lim: Limits, limit: np.ndarray, cap
             break
         finer = build_layout(curve, grid, lim, *nodes, feed_at_u, ends)
         # linearised first at the last schedule (its polygon): it is nearly the answer
-        cut = plan_schedule(finer, lim, np.interp(finer.xi, layout.xi, schedule.c))
+        cut = plan_schedule(finer, lim, np.interp(finer.xi, layout.xi, schedule.c), None,
+                            slack)
         if not cut.solved:
             break
         layout, schedule = finer, cut

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -14,6 +15,9 @@ from nurbsfeed.geometry.nurbs import NurbsCurve
 from nurbsfeed.planning.grid import Grid, polygon_length
 from nurbsfeed.planning.limits import Limits
 from nurbsfeed.planning.timelaw import TimeLaw
+
+if TYPE_CHECKING:
+    from nurbsfeed.planning.schedule import Schedule
 
 GRID_STEPS = 2.0  # grid nodes at most this many full-speed steps apart
 MAX_GRID_NODES = 200_000  # per curve: spacing grows for very long curves at tiny periods
@@ -87,6 +91,9 @@ class Plan:
     # planning.path_plan's schedule, whose keys are the rests alone, PathDiagnostics
     planner: str
     diagnostics: SCurveDiagnostics | PathDiagnostics
+    # the path planner's spline (None under the S-curve planner): where a chain planned in
+    # windows hands the motion on, the state there and the cells after it (planning.window)
+    schedule: Schedule | None = None
 
     @cached_property
     def n_periods(self) -> int:

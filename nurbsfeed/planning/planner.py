@@ -68,6 +68,21 @@ def _path_plan(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s: np
     return plan
 
 
+def plan_window(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s: np.ndarray,
+                ends: ChainEnds, seed: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
+                max_curve_time_s: float = math.inf) -> Plan | None:
+    """The path planner's plan of a window of a chain that starts moving (`chain_schedule`),
+    ending at rest; None where it cannot be planned so (there is no other planner to take it:
+    the caller plans otherwise)."""
+    made = _path_schedule(curve, lim, feed_u, feed_mm_s, max_curve_time_s, 1.0, ends, seed)
+    if made is None:
+        return None
+    grid, kappa0, schedule = made
+    n_peaks = int(np.count_nonzero(grid.kappa_1_mm[grid.peak_index] >= kappa0))
+    plan = _schedule_plan(curve, lim, grid, kappa0, n_peaks, schedule)
+    return plan if plan.cycle_time_s <= max_curve_time_s else None
+
+
 def chain_schedule(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s: np.ndarray,
                    ends: ChainEnds, seed: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
                    ) -> PathSchedule | None:
@@ -120,4 +135,4 @@ def _schedule_plan(curve: NurbsCurve, lim: Limits, grid: Grid, kappa0: float, n_
     return Plan(curve=curve, limits=lim, grid=grid, key_node=rest_nodes, key_kind=kinds,
                 law=law, uniform_slowdown=schedule.slowdown, piece_key=piece_key,
                 piece_periods=periods, piece_scale=scale, planner=lim.planner,
-                diagnostics=diagnostics)
+                diagnostics=diagnostics, schedule=schedule.schedule)

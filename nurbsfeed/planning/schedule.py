@@ -178,17 +178,21 @@ def _fold_rests(layout: Layout, idx: np.ndarray, val: np.ndarray) -> None:
             val[rows, je] = 0.0
 
 
-def _fix_ends(layout: Layout, idx: np.ndarray, val: np.ndarray, rhs: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+def _fix_ends(layout: Layout, idx: np.ndarray, val: np.ndarray, rhs: np.ndarray,
+              slack: tuple[float, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
     """The rows with the coefficients a moving end fixes (`Layout.fixed`) moved to their right
     side, and those left without a variable dropped; also whether the fixed state itself
     breaks one of those by more than BETWEEN_REL of its bound (it is the state the chain
-    starts or ends in: a schedule cannot change it)."""
+    starts or ends in: a schedule cannot change it). slack (share, mm): the rows within that
+    distance of a moving start loosened by that share of their bound (`plan_schedule`)."""
     fixed, values = layout.fixed_index, layout.fixed_values
     if fixed.size == 0:
         return idx, val, rhs, False
     rhs = rhs.copy()
     bound = np.abs(rhs)
+    if layout.moving[0] and slack[0] > 0.0:
+        near = layout.xi[idx] <= layout.xi[0] + slack[1]
+        rhs[near] += slack[0] * bound[near]
     for k, value in zip(fixed, values):
         rows = np.flatnonzero((idx <= k) & (idx + 2 >= k))
         j = k - idx[rows]
@@ -201,11 +205,14 @@ def _fix_ends(layout: Layout, idx: np.ndarray, val: np.ndarray, rhs: np.ndarray
 
 
 def plan_schedule(layout: Layout, lim: Limits, start: np.ndarray | None = None,
-                  seed: tuple[np.ndarray, np.ndarray] | None = None) -> Schedule:
+                  seed: tuple[np.ndarray, np.ndarray] | None = None,
+                  slack: tuple[float, float] = (0.0, 0.0)) -> Schedule:
     """The schedule on `layout` under `lim` (module docstring); start: coefficients (C,) to
     linearise the first program at (by default, each limit's value at b' = b'' = 0, and where
     a seed (xi (K,), c (K,)) covers the coefficients, its: the schedule a moving end's state
-    comes from, whose rows hold there at its own point)."""
+    comes from, whose rows hold there at its own point). slack (share, mm): every limit within
+    that distance of a moving start loosened by that share (of an acceleration or a jerk), for
+    a start in a state the limits there leave no way on from (planning.path_plan)."""
     acc_x = np.array(lim.axis_acc_mm_s2, dtype=float)
     vel_x = np.array(lim.axis_vel_mm_s, dtype=float)
     jerk_x = np.array(lim.axis_jerk_mm_s3, dtype=float)
@@ -254,7 +261,7 @@ def plan_schedule(layout: Layout, lim: Limits, start: np.ndarray | None = None,
                      jerk_x, lim.period_s, idx, val, rhs)
         ri, rv, rr = idx[:r].copy(), val[:r].copy(), rhs[:r].copy()
         _fold_rests(layout, ri, rv)
-        ri, rv, rr, state_breaks = _fix_ends(layout, ri, rv, rr)
+        ri, rv, rr, state_breaks = _fix_ends(layout, ri, rv, rr, slack)
         if state_breaks:
             break
         r = ri.size
@@ -314,10 +321,15 @@ def plan_schedule(layout: Layout, lim: Limits, start: np.ndarray | None = None,
     cell_ratios(best_c, cells, geo, np.array(POINTS), lim.jerk_mm_s3, lim.acc_mm_s2,
                 lim.normal_jerk_mm_s3, acc_x, vel_x, jerk_x, lim.period_s, ratios)
     _open_end_ratios(layout, lim, best_c, ratios)
-    slowdown = max(1.0, float(ratios.max(initial=0.0)))
     between = np.empty(q_n)
     cell_ratios(best_c, cells, layout.between, np.array(BETWEEN), lim.jerk_mm_s3, lim.acc_mm_s2,
                 lim.normal_jerk_mm_s3, acc_x, vel_x, jerk_x, lim.period_s, between)
+    if layout.moving[0] and slack[0] > 0.0:
+        # what the slack allows is no slowdown: an acceleration's share is the square of one
+        near = layout.xi[cells[:, 0].astype(np.int64)] <= layout.xi[0] + slack[1]
+        for r in (ratios, between):
+            r[near] /= (1.0 + slack[0]) ** 0.5
+    slowdown = max(1.0, float(ratios.max(initial=0.0)))
     best_c.setflags(write=False)
     return Schedule(layout, best_c, float(best_t), slowdown, programs, solved,
                     between > 1.0 + BETWEEN_REL)
