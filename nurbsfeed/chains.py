@@ -49,6 +49,10 @@ class ChainWindow:
 
     blocks: tuple[CurveBlock, ...]
     between: tuple[tuple[PassThrough, ...], ...]
+    # a window cut from a longer chain: the curves after its cut, which the next window starts
+    # with (its look-ahead), and the lines at the cut and between them (len(ahead),)
+    ahead: tuple[CurveBlock, ...] = ()
+    ahead_between: tuple[tuple[PassThrough, ...], ...] = ()
 
 
 def _estimated_nodes(block: CurveBlock, machine: Machine) -> float:
@@ -138,8 +142,8 @@ class _Window:
         kappas = [_joint_kappa(self.blocks[j].curve, self.blocks[j + 1].curve)
                   for j in range(first, n - 1)]
         j = first + int(np.argmax(kappas))
-        yield ChainWindow(tuple(self.blocks[:j + 1]), tuple(self.between[:j]))
-        yield from self.between[j]
+        yield ChainWindow(tuple(self.blocks[:j + 1]), tuple(self.between[:j]),
+                          tuple(self.blocks[j + 1:]), tuple(self.between[j:]))
         self.blocks = self.blocks[j + 1:]
         self.between = self.between[j + 1:]
         self.weights = chain_weights(self.blocks[0].curve)

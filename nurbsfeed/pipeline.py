@@ -168,15 +168,40 @@ def convert_stream(items: Iterator[ProgramItem], out: BinaryIO, machine: Machine
     """Write the converted program for `items` to `out`; fill `report` curve by curve. Curves
     that join are converted as chains (chains.chain_items, design §3b)."""
     index = 0
-    for item in chain_items(items, machine):
+    stream = iter(chain_items(items, machine))
+    for item in stream:
         if isinstance(item, PassThrough):
             out.write(item.text.encode(ENCODING, ERRORS))
+            continue
+        if item.ahead and trace is None and rest_move_periods(machine) == 1:
+            from nurbsfeed.windowed import ChainOutput, convert_windows
+
+            def chain_windows(first: ChainWindow) -> Iterator[ChainWindow]:
+                window = first
+                yield window
+                while window.ahead:
+                    window = next(stream)  # type: ignore[assignment]
+                    yield window
+
+            output = ChainOutput(out, machine, method)
+            first = item.blocks[0]
+            end = convert_windows(chain_windows(item), output, index)
+            result = CurveResult(index, first.curve.name, first.location, output.points + 1,
+                                 output.writer.moves if output.writer else 0, 0.0,
+                                 output.cycle_s, first.units)
+            report.curves.append(result)
+            if on_curve is not None:
+                on_curve(result)
+            index = end
             continue
         for result in convert_window(item, index, out, machine, method, trace):
             report.curves.append(result)
             if on_curve is not None:
                 on_curve(result)
             index += 1
+        if item.ahead:  # a window at rest at its cut: the lines there come after it
+            out.write(b"".join(line.text.encode(ENCODING, ERRORS)
+                               for line in item.ahead_between[0]))
 
 
 def convert_block(block: CurveBlock, index: int, out: BinaryIO, machine: Machine, method: str,

@@ -1,0 +1,250 @@
+"""A long chain converted in overlapping windows that run on into each other (design §3b, "Long
+chains"; a prototype on branch chain-windows: the default profile's path, no rest-move merging,
+no trace, `check` not taught yet).
+
+Each window is planned with its look-ahead (the curves after its cut) to rest at the look-ahead's
+end, and written up to its last point before the cut; the next window starts there, with the rest
+of that curve, moving in the state the law had there (planning.window.hand_on). Where the next
+window cannot be planned so, the window is planned again without its look-ahead, to rest at
+its cut, written whole, and the next starts from rest: today's windows.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import BinaryIO
+
+import numpy as np
+
+from nurbsfeed.chains import ChainWindow
+from nurbsfeed.errors import CurveError
+from nurbsfeed.files import ENCODING, ERRORS
+from nurbsfeed.gcode.profile_record import record_lines
+from nurbsfeed.gcode.writer import MoveWriter, chain_comment, comment_line
+from nurbsfeed.interpolate.stepping import Stepping
+from nurbsfeed.machine import Machine
+from nurbsfeed.planning.basis import AT_REST, ChainEnds
+from nurbsfeed.planning.chain import curve_after
+from nurbsfeed.planning.plan import Plan
+from nurbsfeed.planning.planner import plan_window
+from nurbsfeed.planning.window import Seed, hand_on
+from nurbsfeed.program import CurveBlock, PassThrough
+from nurbsfeed.safety import MotionGuard, feed_cap_mm_s, slowdown_from_points
+
+KNOT_CLEARANCE = 1e-3  # of a piece's span: how near a knot a hand-on point may lie
+HAND_ON_TRIES = 16  # points before the cut tried as the hand-on point
+
+
+@dataclass
+class _Start:
+    """How the next window starts: its first curve (the rest of one the last window wrote part
+    of, or None), the lines at the last window's cut, the state and the seed."""
+
+    tail: CurveBlock | None
+    lines_at_cut: tuple[PassThrough, ...]
+    ends: ChainEnds
+    seed: Seed | None
+
+
+@dataclass
+class _Planned:
+    window: ChainWindow
+    start: _Start
+    blocks: list[CurveBlock]
+    between: list[tuple[PassThrough, ...]]
+    block: CurveBlock
+    chain: object
+    plan: Plan
+    landings: object
+
+
+class ChainOutput:
+    """One chain's writer and motion guard, run on across its windows."""
+
+    def __init__(self, out: BinaryIO, machine: Machine, method: str) -> None:
+        self.out, self.machine, self.method = out, machine, method
+        self.writer: MoveWriter | None = None
+        self.guard: MotionGuard | None = None
+        self.points = 0
+        self.cycle_s = 0.0
+
+
+def _plan(window: ChainWindow, start: _Start, machine: Machine, method: str,
+          with_ahead: bool) -> _Planned | None:
+    from nurbsfeed.pipeline import _checked_block, chain_block
+
+    blocks = ([start.tail] if start.tail is not None else []) + list(window.blocks)
+    between = ([start.lines_at_cut] if start.tail is not None else []) + list(window.between)
+    if with_ahead:
+        between.append(window.ahead_between[0])
+        blocks += list(window.ahead)
+        between += list(window.ahead_between[1:])
+    merged = ChainWindow(tuple(blocks), tuple(between))
+    block, chain, _ = chain_block(merged, machine.limits)
+    if start.ends.start is None:
+        plan, landings = _checked_block(block, machine, method)
+        return _Planned(window, start, blocks, between, block, chain, plan, landings)
+    lim = machine.limits
+    plan = plan_window(block.curve, lim, block.feed_u, block.feed_mm_s, start.ends, start.seed,
+                       machine.max_curve_time_s)
+    if plan is None:
+        return None
+    stepping = Stepping(plan, method)
+    caps = dataclasses.replace(lim, feed_mm_s=min(feed_cap_mm_s(lim, block), lim.feed_mm_s))
+    speed, asks = slowdown_from_points(caps, (chunk.points for chunk in stepping.chunks()))
+    if speed > 1.0 + 5e-4 or asks > 1.0 + 5e-3:
+        return None
+    return _Planned(window, start, blocks, between, block, chain, plan, stepping.landed)
+
+
+def _hand_on_point(planned: _Planned, method: str) -> tuple[int, float] | None:
+    """The point (index, merged u) the next window starts at: the last before the cut joint,
+    clear of every knot."""
+    chain = planned.chain
+    n_written = len(planned.blocks) - len(planned.window.ahead)
+    u_cut = float(chain.u_start[n_written])
+    candidates = []
+    for chunk in Stepping(planned.plan, method, planned.landings).chunks():
+        keep = chunk.u <= u_cut
+        candidates.extend(zip(range(chunk.k0, chunk.k0 + int(keep.sum())), chunk.u[keep]))
+        candidates = candidates[-HAND_ON_TRIES:]
+        if not keep.all():
+            break
+    breaks = planned.chain.curve.span_breaks
+    for k, u in reversed(candidates):
+        at = int(np.searchsorted(breaks, u))
+        lo, hi = breaks[max(at - 1, 0)], breaks[min(at, breaks.size - 1)]
+        clearance = min(u - lo, hi - u) / max(hi - lo, 1e-300)
+        if clearance >= KNOT_CLEARANCE:
+            return int(k), float(u)
+    return None
+
+
+def _next_start(planned: _Planned, method: str) -> tuple[_Start, int] | None:
+    point = _hand_on_point(planned, method)
+    if point is None:
+        return None
+    k, u = point
+    made = hand_on(planned.plan, k)
+    if made is None or made[0].start is None:
+        return None
+    ends, seed = made
+    chain = planned.chain
+    piece = int(chain.piece_of(np.array([u]))[0])
+    local = float(chain.piece_u(np.array([u]), np.array([piece]))[0])
+    block = planned.blocks[piece]
+    curve = block.curve
+    tail_curve = curve_after(curve, curve.u_min + local * (curve.u_max - curve.u_min))
+    feed_u, feed_mm_s = block.feed_u, block.feed_mm_s
+    if feed_u.size:  # the feed steps after the point, on the tail's parameter
+        u_tail = (feed_u - local) / (1.0 - local)
+        keep = u_tail > 0.0
+        last_before = np.flatnonzero(~keep)
+        lead = feed_mm_s[last_before[-1:]] if last_before.size else np.empty(0)
+        feed_u = np.concatenate([[0.0] if lead.size else [], u_tail[keep]])
+        feed_mm_s = np.concatenate([lead, feed_mm_s[keep]])
+    tail = dataclasses.replace(block, curve=tail_curve, feed_u=feed_u, feed_mm_s=feed_mm_s,
+                               rapid_to_start=False)
+    n_written = len(planned.blocks) - len(planned.window.ahead)
+    lines = planned.window.ahead_between[0] if piece == n_written - 1 else ()
+    if piece != n_written - 1:
+        return None  # the point lies before the last written curve: not tried here
+    return _Start(tail, lines, ends, seed), k
+
+
+def _write(planned: _Planned, out: ChainOutput, index: int, upto: int | None) -> None:
+    """Write the planned window's points after its first, up to point `upto` (None: all), with
+    the lines at the joints it crosses."""
+    from nurbsfeed.pipeline import _JointLines
+
+    machine, plan, block = out.machine, planned.plan, planned.block
+    eol = block.eol.encode("ascii")
+    period_s = plan.limits.period_s
+    last = plan.n_periods if upto is None else upto
+    if index == 0 and out.writer is None:
+        out.out.write(b"".join(comment_line(line, block.semicolon_comments).encode("ascii") + eol
+                               for line in record_lines(machine)))
+    n_curves = len(planned.blocks) - (len(planned.window.ahead) if upto is not None else 0)
+    comment = chain_comment(index, index + n_curves - 1, block.curve.name, last + 1,
+                            period_s, out.method, last * period_s, plan.length_mm, block.units)
+    if out.writer is not None:
+        out.writer.end_curve()
+    out.out.write(comment_line(comment, block.semicolon_comments).encode(ENCODING, ERRORS) + eol)
+    if out.writer is None:
+        out.writer = MoveWriter(out.out, machine.decimals, machine.feed_decimals, period_s,
+                                block.eol, block.curve.points[0], block.units)
+        out.guard = MotionGuard(dataclasses.replace(
+            plan.limits, feed_mm_s=feed_cap_mm_s(plan.limits, block)), block.curve.name)
+    between = planned.between[:len(planned.blocks) - 1]
+    lines = _JointLines(out.writer, out.out, tuple(between))
+    joint_u = planned.chain.joint_u
+    for chunk in Stepping(plan, out.method, planned.landings).chunks():
+        if chunk.stretch is None:
+            continue
+        points, u = chunk.points, chunk.u
+        ks = np.arange(chunk.k0, chunk.k0 + u.size)
+        points, u = points[ks <= last], u[ks <= last]
+        if not len(points):
+            break
+        try:
+            out.guard.check(points)
+        except CurveError as exc:
+            raise exc.at(block.location) from None
+        while len(lines.crossings) < joint_u.size and u[-1] > joint_u[len(lines.crossings)]:
+            before = int(np.searchsorted(u, joint_u[len(lines.crossings)], side="right"))
+            lines.crossings.append(chunk.k0 + before - 1)
+        lines.add(points)
+        if ks[-1] >= last:
+            break
+    if upto is None:
+        lines.add(np.empty((0, 3)))
+        lines.finish()
+    out.points += last
+    out.cycle_s += last * period_s
+
+
+def convert_windows(windows, out: ChainOutput, index: int) -> int:
+    """Convert the windows of one chain (each but the last with a look-ahead), in order; returns
+    the index after its last curve."""
+    start = _Start(None, (), AT_REST, None)
+    pending: _Planned | None = None
+    for window in windows:
+        if pending is not None:
+            made = _next_start(pending, out.method)
+            nxt = None
+            if made is not None:
+                nxt_start, k = made
+                nxt = _plan(window, nxt_start, out.machine, out.method, bool(window.ahead))
+            if nxt is not None:
+                _write(pending, out, index, k)
+                index += len(pending.blocks) - len(pending.window.ahead) - 1
+            else:
+                # the last window to rest at its cut, whole; this one from rest
+                short = _plan(pending.window, pending.start, out.machine, out.method, False)
+                if short is None:
+                    raise CurveError("a window of a chain could not be planned again to rest",
+                                     pending.block.location)
+                _write(short, out, index, None)
+                index += len(short.blocks)
+                if out.writer is not None:
+                    out.writer.end_curve()
+                out.out.write(b"".join(line.text.encode(ENCODING, ERRORS)
+                                       for line in pending.window.ahead_between[0]))
+                nxt = _plan(window, _Start(None, (), AT_REST, None), out.machine, out.method,
+                            bool(window.ahead))
+            pending = nxt
+        else:
+            pending = _plan(window, start, out.machine, out.method, bool(window.ahead))
+        if pending is None:
+            raise CurveError("a window of a chain could not be planned", window.blocks[0].location)
+        if not window.ahead:
+            _write(pending, out, index, None)
+            index += len(pending.blocks)
+            if out.writer is not None:
+                out.writer.end_curve()
+            if pending.block.feed_word_after:
+                eol = pending.block.eol
+                out.out.write((pending.block.feed_word_after + eol).encode(ENCODING, ERRORS))
+            pending = None
+    return index
