@@ -22,6 +22,7 @@ chain ends there).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -30,7 +31,18 @@ import numpy as np
 from nurbsfeed.gcode.writer import round_ticks, written_decimals
 from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.machine import Machine
-from nurbsfeed.planning.chain import CORNER_TURN_RAD, can_follow, chain_weights
+from nurbsfeed.planning.chain import (
+    CORNER_TURN_RAD,
+    Chain,
+    Joints,
+    can_follow,
+    chain_feed,
+    chain_weights,
+    joint_feed,
+    joints,
+    merge_curves,
+)
+from nurbsfeed.planning.limits import Limits
 from nurbsfeed.planning.plan import GRID_STEPS
 from nurbsfeed.program import MM_PER_UNIT, CurveBlock, PassThrough, ProgramItem
 
@@ -183,3 +195,23 @@ def chain_items(items: Iterator[ProgramItem], machine: Machine
         window = _Window(block, machine)
     if window is not None:
         yield from window.finish()
+
+
+def chain_block(window: ChainWindow, lim: Limits) -> tuple[CurveBlock, Chain, Joints]:
+    """The window's curves as one block (planning.chain.merge_curves): the merged curve, the
+    pieces' feeds as one step function with a step down at each joint that the period rule
+    slows (`joint_feed`), the first block's modal state and the last one's F to restore."""
+    blocks = window.blocks
+    if len(blocks) == 1:
+        chain = merge_curves([blocks[0].curve])
+        return blocks[0], chain, joints(chain, lim)
+    names = [b.curve.name for b in blocks if b.curve.name]
+    chain = merge_curves([b.curve for b in blocks], names[0] if names else "")
+    found = joints(chain, lim)
+    feed_u, feed_mm_s = chain_feed(chain, [(b.feed_u, b.feed_mm_s) for b in blocks])
+    feed_u, feed_mm_s = joint_feed(chain, found.cap_mm_s, feed_u, feed_mm_s)
+    for arr in (feed_u, feed_mm_s):
+        arr.setflags(write=False)
+    block = dataclasses.replace(blocks[0], curve=chain.curve, feed_u=feed_u, feed_mm_s=feed_mm_s,
+                                feed_word_after=blocks[-1].feed_word_after)
+    return block, chain, found

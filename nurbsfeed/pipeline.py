@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import math
 import shutil
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -26,7 +25,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-from nurbsfeed.chains import ChainWindow, chain_items
+from nurbsfeed.chains import ChainWindow, chain_block, chain_items
 from nurbsfeed.errors import CurveError, InputError, Location
 from nurbsfeed.files import ENCODING, ERRORS, atomic_output
 from nurbsfeed.gcode.profile_record import record_lines
@@ -38,19 +37,31 @@ from nurbsfeed.gcode.writer import (
     cycle_comment,
     rapid_line,
 )
-from nurbsfeed.geometry import NurbsCurve
-from nurbsfeed.interpolate.landing import Landing
 from nurbsfeed.interpolate.stepping import Stepping
+from nurbsfeed.joint_lines import JointLines
 from nurbsfeed.machine import Machine
-from nurbsfeed.planning.chain import Chain, Joints, chain_feed, joint_feed, joints, merge_curves
-from nurbsfeed.planning.limits import Limits
+from nurbsfeed.planning.chain import Chain
 from nurbsfeed.planning.plan import Plan
-from nurbsfeed.planning.planner import plan_curve
 from nurbsfeed.program import CurveBlock, PassThrough, ProgramItem
 from nurbsfeed.readers import read_program
 from nurbsfeed.rest_moves import RestMoves, rest_move_periods
-from nurbsfeed.safety import GUARD_FEED_REL, MotionGuard, feed_cap_mm_s, slowdown_from_points
+from nurbsfeed.safety import MotionGuard, feed_cap_mm_s
 from nurbsfeed.trace import TRACE_HEADER, write_trace_rows
+from nurbsfeed.verified import (
+    POSITION_REL,
+    POSITION_ROUNDS,
+    POSITION_SPEED_REL,
+    _checked_block,
+    plan_block,
+    verified_plan,
+)
+from nurbsfeed.windowed import ChainOutput, convert_windows, windows_run_on
+
+# what callers read from here (planning, checking and merging live beside it)
+__all__ = ["POSITION_REL", "POSITION_ROUNDS", "POSITION_SPEED_REL", "CurveResult", "FileReport",
+           "chain_block", "convert_block", "convert_file", "convert_stream", "convert_window",
+           "joint_speeds", "plan_block", "read_program", "verified_plan"]
+
 
 
 @dataclass(frozen=True)
@@ -83,85 +94,6 @@ class FileReport:
         return sum(c.cycle_time_s for c in self.curves)
 
 
-# the path planner's points read as positions (plan_block): the excess they may show, and the
-# uniform slowdowns that take it back before the S-curve planner plans the curve instead
-POSITION_REL = 0.005
-# half the motion guard's allowance on a speed; the stepping's own error (1e-5) stays below it
-POSITION_SPEED_REL = 0.5 * GUARD_FEED_REL
-POSITION_ROUNDS = 2
-
-
-# A plan, and how its stretches landed when `verified_plan` stepped it (None: it did not, as
-# under the paper model): `Stepping` given them steps the same points without the search.
-Checked = tuple[Plan, tuple[Landing, ...] | None]
-
-
-def plan_block(block: CurveBlock, machine: Machine, method: str = "rk2c") -> Plan:
-    """Plan one curve, given in mm (`CurveBlock.in_mm`), under the machine's limits
-    (`verified_plan`); a curve the planner refuses (e.g. longer than max_curve_time_s) is
-    refused at the block."""
-    return _checked_block(block, machine, method)[0]
-
-
-def _checked_block(block: CurveBlock, machine: Machine, method: str) -> Checked:
-    """`plan_block`, with the landings of `_checked_plan`."""
-    if not block.lengths_in_mm:
-        raise ValueError("plan_block takes a block in mm: CurveBlock.in_mm()")
-    try:
-        return _checked_plan(block.curve, machine.limits, block.feed_u, block.feed_mm_s,
-                             machine.max_curve_time_s, method,
-                             feed_cap_mm_s(machine.limits, block))
-    except CurveError as exc:
-        raise exc.at(block.location) from None
-
-
-def verified_plan(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s: np.ndarray,
-                  max_curve_time_s: float = math.inf, method: str = "rk2c",
-                  feed_cap: float = math.inf) -> Plan:
-    """The plan of `_checked_plan`."""
-    return _checked_plan(curve, lim, feed_u, feed_mm_s, max_curve_time_s, method, feed_cap)[0]
-
-
-def _checked_plan(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s: np.ndarray,
-                  max_curve_time_s: float, method: str, feed_cap: float) -> Checked:
-    """`planner.plan_curve`, and under the path model a look at the plan's points (design §2e):
-    stepped by `method`, they are read as positions one period apart
-    (`safety.slowdown_from_points`, feed_cap the highest feed on the curve); where the path's
-    speed or an axis's velocity is above its limit by more than POSITION_SPEED_REL, or an axis's
-    acceleration or jerk, or the jerk vector, by more than POSITION_REL, the law is slowed
-    uniformly by what they ask (POSITION_ROUNDS times at most). The speeds are held closer: the
-    motion guard allows them GUARD_FEED_REL (0.1 %), less than POSITION_REL (a law at a
-    0.1 mm/s feed stepped to 0.100101 mm/s would be refused as a valid program).
-    A path plan still above then gives way to the S-curve plan, read the same way: the one
-    bounded fallback. A plan still above after all that goes on to the motion guard, which
-    refuses it (exit 2, located, nothing written). The plan comes with how its stretches
-    landed when its points were read (`Checked`): the conversion steps it again with them."""
-    planners = [lim.planner] + (["scurve"] if lim.planner == "optimal" else [])
-    plan = plan_curve(curve, lim, feed_u, feed_mm_s, max_curve_time_s)
-    if lim.jerk_model != "path":  # the paper model's jerk limits are the law's and a proxy
-        return plan, None
-    caps = dataclasses.replace(plan.limits, feed_mm_s=min(feed_cap, plan.limits.feed_mm_s))
-    for planner in planners:
-        planned = dataclasses.replace(lim, planner=planner)
-        if planner != lim.planner:
-            plan = plan_curve(curve, planned, feed_u, feed_mm_s, max_curve_time_s)
-        slowdown = 1.0
-        for round_ in range(POSITION_ROUNDS + 1):
-            stepping = Stepping(plan, method)
-            speed, asks = slowdown_from_points(caps, (chunk.points
-                                                      for chunk in stepping.chunks()))
-            landed = stepping.landed
-            asks = max(speed if speed > 1.0 + POSITION_SPEED_REL else 1.0,
-                       asks if asks > 1.0 + POSITION_REL else 1.0)
-            if asks <= 1.0:
-                return plan, landed
-            if round_ == POSITION_ROUNDS:
-                break
-            slowdown *= asks * (1.0 + POSITION_REL)
-            plan = plan_curve(curve, planned, feed_u, feed_mm_s, max_curve_time_s, slowdown)
-    return plan, landed  # the plan last stepped
-
-
 def convert_stream(items: Iterator[ProgramItem], out: BinaryIO, machine: Machine, method: str,
                    report: FileReport, trace: BinaryIO | None = None,
                    on_curve: Callable[[CurveResult], None] | None = None) -> None:
@@ -173,26 +105,12 @@ def convert_stream(items: Iterator[ProgramItem], out: BinaryIO, machine: Machine
         if isinstance(item, PassThrough):
             out.write(item.text.encode(ENCODING, ERRORS))
             continue
-        if item.ahead and trace is None and rest_move_periods(machine) == 1:
-            from nurbsfeed.windowed import ChainOutput, convert_windows
-
-            def chain_windows(first: ChainWindow) -> Iterator[ChainWindow]:
-                window = first
-                yield window
-                while window.ahead:
-                    window = next(stream)  # type: ignore[assignment]
-                    yield window
-
-            output = ChainOutput(out, machine, method)
-            first = item.blocks[0]
-            end = convert_windows(chain_windows(item), output, index)
-            result = CurveResult(index, first.curve.name, first.location, output.points + 1,
-                                 output.writer.moves if output.writer else 0, 0.0,
-                                 output.cycle_s, first.units)
-            report.curves.append(result)
-            if on_curve is not None:
-                on_curve(result)
-            index = end
+        if item.ahead and windows_run_on(machine):
+            output = ChainOutput(out, machine, method, trace)
+            named: list[CurveBlock] = []  # the chain's curves, in order (for their results)
+            start = index
+            index = convert_windows(_chain_windows(item, stream, named), output, index)
+            _windowed_results(start, output, named, report, on_curve)
             continue
         for result in convert_window(item, index, out, machine, method, trace):
             report.curves.append(result)
@@ -204,77 +122,49 @@ def convert_stream(items: Iterator[ProgramItem], out: BinaryIO, machine: Machine
                                for line in item.ahead_between[0]))
 
 
+def _chain_windows(first: ChainWindow, stream: Iterator[ChainWindow | PassThrough],
+                   named: list[CurveBlock]) -> Iterator[ChainWindow]:
+    """The windows of one chain from `first` on (a window that runs on is followed by the
+    next window of its chain, chains.chain_items), their curves added to `named`."""
+    window = first
+    while True:
+        named.extend(window.blocks)
+        yield window
+        if not window.ahead:
+            return
+        nxt = next(stream)
+        assert isinstance(nxt, ChainWindow), "a window with a look-ahead is followed by its next"
+        window = nxt
+
+
+def _windowed_results(start: int, output: ChainOutput, named: list[CurveBlock], report: FileReport,
+                      on_curve: Callable[[CurveResult], None] | None) -> None:
+    """One result per curve of a chain converted in windows that run on (nurbsfeed.windowed),
+    curves from index `start`: a curve split between two windows adds up; the moves are
+    counted on the last."""
+    totals: dict[int, list[float]] = {}
+    for i, periods, length in output.curves:
+        row = totals.setdefault(i, [0.0, 0.0])
+        row[0] += periods
+        row[1] += length
+    last = max(totals)
+    for i in sorted(totals):
+        n_periods, length = totals[i]
+        b = named[i - start]
+        result = CurveResult(i, b.curve.name, b.location,
+                             int(n_periods) + (1 if i == start else 0),
+                             (output.writer.moves if output.writer else 0) if i == last else 0,
+                             length, n_periods * output.machine.limits.period_s, b.units)
+        report.curves.append(result)
+        if on_curve is not None:
+            on_curve(result)
+
+
 def convert_block(block: CurveBlock, index: int, out: BinaryIO, machine: Machine, method: str,
                   trace: BinaryIO | None) -> CurveResult:
     """Replace one curve block, alone (a chain of one), by its comment line and G1 moves."""
     return convert_window(ChainWindow((block.in_mm(),), ()), index, out, machine, method,
                           trace)[0]
-
-
-def chain_block(window: ChainWindow, lim: Limits) -> tuple[CurveBlock, Chain, Joints]:
-    """The window's curves as one block (planning.chain.merge_curves): the merged curve, the
-    pieces' feeds as one step function with a step down at each joint that the period rule
-    slows (`joint_feed`), the first block's modal state and the last one's F to restore."""
-    blocks = window.blocks
-    if len(blocks) == 1:
-        chain = merge_curves([blocks[0].curve])
-        return blocks[0], chain, joints(chain, lim)
-    names = [b.curve.name for b in blocks if b.curve.name]
-    chain = merge_curves([b.curve for b in blocks], names[0] if names else "")
-    found = joints(chain, lim)
-    feed_u, feed_mm_s = chain_feed(chain, [(b.feed_u, b.feed_mm_s) for b in blocks])
-    feed_u, feed_mm_s = joint_feed(chain, found.cap_mm_s, feed_u, feed_mm_s)
-    for arr in (feed_u, feed_mm_s):
-        arr.setflags(write=False)
-    block = dataclasses.replace(blocks[0], curve=chain.curve, feed_u=feed_u, feed_mm_s=feed_mm_s,
-                                feed_word_after=blocks[-1].feed_word_after)
-    return block, chain, found
-
-
-class _JointLines:
-    """Hands points to the writer and, where the motion crosses a joint, writes the lines read
-    there, in place (design §3b): after the last point at or before the joint. `crossings`
-    (J,): the count of points handed on (the chain's first point not counted) after which
-    each joint's lines come; a joint whose count is not known yet is None."""
-
-    def __init__(self, writer: MoveWriter | None, out: BinaryIO,
-                 between: tuple[tuple[PassThrough, ...], ...]) -> None:
-        self.writer = writer
-        self.out = out
-        self.between = between
-        self.crossings: list[int] = []
-        self.given = 0
-        self.written = 0  # joints whose lines are written
-
-    def add(self, points: np.ndarray) -> None:
-        while (self.written < len(self.crossings)
-               and self.crossings[self.written] <= self.given + len(points)):
-            cut = self.crossings[self.written] - self.given
-            self._give(points[:cut])
-            points = points[cut:]
-            self._lines(self.written)
-            self.written += 1
-        self._give(points)
-
-    def finish(self) -> None:
-        while self.written < len(self.between):  # joints at the very end (none: a safeguard)
-            self._lines(self.written)
-            self.written += 1
-
-    def _give(self, points: np.ndarray) -> None:
-        if len(points) and self.writer is not None:
-            self.writer.add_points(points)
-        self.given += len(points)
-
-    def _lines(self, joint: int) -> None:
-        lines = self.between[joint]
-        if not lines:
-            return
-        if self.writer is not None:
-            self.writer.end_curve()
-        self.out.write(b"".join(line.text.encode(ENCODING, ERRORS) for line in lines))
-        if self.writer is not None and any(line.words for line in lines):
-            self.writer.after_lines()
 
 
 def convert_window(window: ChainWindow, index: int, out: BinaryIO, machine: Machine,
@@ -324,7 +214,7 @@ def convert_window(window: ChainWindow, index: int, out: BinaryIO, machine: Mach
             out.write(b"G90" + eol)
         writer = MoveWriter(out, machine.decimals, machine.feed_decimals, period_s, block.eol,
                             block.curve.points[0], block.units)
-    lines = _JointLines(writer, out, window.between)
+    lines = JointLines(writer, out, window.between)
     periods = rest_move_periods(machine)
     rest = RestMoves(block.curve, plan.limits.chord_mm, periods) if periods > 1 else None
     s_mm = 0.0

@@ -17,23 +17,36 @@ from typing import BinaryIO
 
 import numpy as np
 
-from nurbsfeed.chains import ChainWindow
+from nurbsfeed.chains import ChainWindow, chain_block
 from nurbsfeed.errors import CurveError
 from nurbsfeed.files import ENCODING, ERRORS
 from nurbsfeed.gcode.profile_record import record_lines
 from nurbsfeed.gcode.writer import MoveWriter, chain_comment, comment_line
+from nurbsfeed.interpolate.landing import Landing
 from nurbsfeed.interpolate.stepping import Stepping
+from nurbsfeed.joint_lines import JointLines
 from nurbsfeed.machine import Machine
 from nurbsfeed.planning.basis import AT_REST, ChainEnds
-from nurbsfeed.planning.chain import curve_after
+from nurbsfeed.planning.chain import Chain, curve_after
 from nurbsfeed.planning.plan import Plan
 from nurbsfeed.planning.planner import plan_window
 from nurbsfeed.planning.window import Seed, hand_on
 from nurbsfeed.program import CurveBlock, PassThrough
 from nurbsfeed.safety import MotionGuard, feed_cap_mm_s, slowdown_from_points
+from nurbsfeed.trace import write_trace_rows
+from nurbsfeed.verified import _checked_block
 
+RUNS_ON = ", runs on"  # the comment of a window the next one runs on from (check joins them)
 KNOT_CLEARANCE = 1e-3  # of a piece's span: how near a knot a hand-on point may lie
 HAND_ON_TRIES = 16  # points before the cut tried as the hand-on point
+
+
+def windows_run_on(machine: Machine) -> bool:
+    """Whether a conversion under `machine` runs a long chain's windows on into each other
+    (the prototype: not where moves beside a rest are merged)."""
+    from nurbsfeed.rest_moves import rest_move_periods
+
+    return rest_move_periods(machine) == 1
 
 
 @dataclass
@@ -54,26 +67,29 @@ class _Planned:
     blocks: list[CurveBlock]
     between: list[tuple[PassThrough, ...]]
     block: CurveBlock
-    chain: object
+    chain: Chain
     plan: Plan
-    landings: object
+    landings: tuple[Landing, ...] | None
 
 
 class ChainOutput:
-    """One chain's writer and motion guard, run on across its windows."""
+    """One chain's writer, motion guard and trace, run on across its windows, and per curve
+    (index, periods, length) as its windows write them (a curve split between two windows
+    comes twice)."""
 
-    def __init__(self, out: BinaryIO, machine: Machine, method: str) -> None:
-        self.out, self.machine, self.method = out, machine, method
+    def __init__(self, out: BinaryIO, machine: Machine, method: str,
+                 trace: BinaryIO | None = None) -> None:
+        self.out, self.machine, self.method, self.trace = out, machine, method, trace
         self.writer: MoveWriter | None = None
         self.guard: MotionGuard | None = None
         self.points = 0
         self.cycle_s = 0.0
+        self.trace_s = 0.0
+        self.curves: list[tuple[int, int, float]] = []
 
 
 def _plan(window: ChainWindow, start: _Start, machine: Machine, method: str,
           with_ahead: bool) -> _Planned | None:
-    from nurbsfeed.pipeline import _checked_block, chain_block
-
     blocks = ([start.tail] if start.tail is not None else []) + list(window.blocks)
     between = ([start.lines_at_cut] if start.tail is not None else []) + list(window.between)
     if with_ahead:
@@ -86,10 +102,11 @@ def _plan(window: ChainWindow, start: _Start, machine: Machine, method: str,
         plan, landings = _checked_block(block, machine, method)
         return _Planned(window, start, blocks, between, block, chain, plan, landings)
     lim = machine.limits
-    plan = plan_window(block.curve, lim, block.feed_u, block.feed_mm_s, start.ends, start.seed,
-                       machine.max_curve_time_s)
-    if plan is None:
+    moving = plan_window(block.curve, lim, block.feed_u, block.feed_mm_s, start.ends,
+                         start.seed, machine.max_curve_time_s)
+    if moving is None:
         return None
+    plan = moving
     stepping = Stepping(plan, method)
     caps = dataclasses.replace(lim, feed_mm_s=min(feed_cap_mm_s(lim, block), lim.feed_mm_s))
     speed, asks = slowdown_from_points(caps, (chunk.points for chunk in stepping.chunks()))
@@ -104,7 +121,7 @@ def _hand_on_point(planned: _Planned, method: str) -> tuple[int, float] | None:
     chain = planned.chain
     n_written = len(planned.blocks) - len(planned.window.ahead)
     u_cut = float(chain.u_start[n_written])
-    candidates = []
+    candidates: list[tuple[int, float]] = []
     for chunk in Stepping(planned.plan, method, planned.landings).chunks():
         keep = chunk.u <= u_cut
         candidates.extend(zip(range(chunk.k0, chunk.k0 + int(keep.sum())), chunk.u[keep]))
@@ -156,8 +173,6 @@ def _next_start(planned: _Planned, method: str) -> tuple[_Start, int] | None:
 def _write(planned: _Planned, out: ChainOutput, index: int, upto: int | None) -> None:
     """Write the planned window's points after its first, up to point `upto` (None: all), with
     the lines at the joints it crosses."""
-    from nurbsfeed.pipeline import _JointLines
-
     machine, plan, block = out.machine, planned.plan, planned.block
     eol = block.eol.encode("ascii")
     period_s = plan.limits.period_s
@@ -166,8 +181,16 @@ def _write(planned: _Planned, out: ChainOutput, index: int, upto: int | None) ->
         out.out.write(b"".join(comment_line(line, block.semicolon_comments).encode("ascii") + eol
                                for line in record_lines(machine)))
     n_curves = len(planned.blocks) - (len(planned.window.ahead) if upto is not None else 0)
-    comment = chain_comment(index, index + n_curves - 1, block.curve.name, last + 1,
-                            period_s, out.method, last * period_s, plan.length_mm, block.units)
+    first_part = out.writer is None
+    length = plan.length_mm
+    if upto is not None:
+        piece, local, _, _, _ = plan.law.sample(np.array([last * period_s]))
+        length = float(plan.law.s0_mm[piece[0]] + local[0])
+    comment = chain_comment(index, index + n_curves - 1, block.curve.name,
+                            last + (1 if first_part else 0), period_s, out.method,
+                            last * period_s, length, block.units)
+    if upto is not None:
+        comment = comment[:-1] + RUNS_ON + comment[-1:]
     if out.writer is not None:
         out.writer.end_curve()
     out.out.write(comment_line(comment, block.semicolon_comments).encode(ENCODING, ERRORS) + eol)
@@ -177,16 +200,27 @@ def _write(planned: _Planned, out: ChainOutput, index: int, upto: int | None) ->
         out.guard = MotionGuard(dataclasses.replace(
             plan.limits, feed_mm_s=feed_cap_mm_s(plan.limits, block)), block.curve.name)
     between = planned.between[:len(planned.blocks) - 1]
-    lines = _JointLines(out.writer, out.out, tuple(between))
+    lines = JointLines(out.writer, out.out, tuple(between))
     joint_u = planned.chain.joint_u
     for chunk in Stepping(plan, out.method, planned.landings).chunks():
-        if chunk.stretch is None:
+        if chunk.stretch is None:  # the start: the chain's first point, or the last written
+            if first_part and out.trace is not None:
+                out.trace_s = write_trace_rows(out.trace, index, chunk, period_s, out.trace_s,
+                                               planned.chain)
             continue
-        points, u = chunk.points, chunk.u
-        ks = np.arange(chunk.k0, chunk.k0 + u.size)
-        points, u = points[ks <= last], u[ks <= last]
-        if not len(points):
+        ks = np.arange(chunk.k0, chunk.k0 + chunk.u.size)
+        keep = ks <= last
+        if not keep.any():
             break
+        if not keep.all():
+            chunk = dataclasses.replace(chunk, u=chunk.u[keep], points=chunk.points[keep],
+                                        ds_mm=chunk.ds_mm[keep])
+        points, u = chunk.points, chunk.u
+        if out.trace is not None:
+            out.trace_s = write_trace_rows(out.trace, index,
+                                           dataclasses.replace(chunk, k0=chunk.k0 + out.points),
+                                           period_s, out.trace_s, planned.chain)
+        assert out.guard is not None
         try:
             out.guard.check(points)
         except CurveError as exc:
@@ -197,9 +231,21 @@ def _write(planned: _Planned, out: ChainOutput, index: int, upto: int | None) ->
         lines.add(points)
         if ks[-1] >= last:
             break
+    crossed = list(lines.crossings)
     if upto is None:
+        while len(lines.crossings) < joint_u.size:  # a joint at the end: no length after it
+            lines.crossings.append(last)
+        crossed = list(lines.crossings)
         lines.add(np.empty((0, 3)))
         lines.finish()
+    ends_k = crossed[:n_curves - 1] + [last]
+    grid = plan.grid
+    ends_s = [*np.interp(planned.chain.joint_u[:n_curves - 1], grid.u, grid.s_mm).tolist(),
+              length]
+    k_before, s_before = 0, 0.0
+    for b in range(n_curves):
+        out.curves.append((index + b, ends_k[b] - k_before, ends_s[b] - s_before))
+        k_before, s_before = ends_k[b], ends_s[b]
     out.points += last
     out.cycle_s += last * period_s
 

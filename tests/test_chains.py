@@ -327,28 +327,46 @@ def _kappa_at(piece: Piece, u: float) -> float:
     return float(np.linalg.norm(np.cross(c1, c2)) / np.linalg.norm(c1) ** 3)
 
 
-def test_long_chains_are_planned_in_windows_that_end_at_a_joint(
-        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """Windows of at most MAX_WINDOW_CURVES curves; each ends at the most curved joint in its
-    second half (curvature from the textbook evaluator here), where the motion rests, and the
-    lines there come between the windows."""
+@pytest.mark.parametrize("dialect", ["fanuc", "linuxcnc"])
+def test_long_chains_are_planned_in_windows_that_run_on_into_each_other(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, dialect: str) -> None:
+    """Windows of at most MAX_WINDOW_CURVES curves, each cut at the most curved joint in its
+    second half (curvature from the textbook evaluator here), planned with the curves after
+    its cut as look-ahead and written up to its last point before the cut; the next one runs on
+    from there moving (nurbsfeed.windowed): the motion rests only at the chain's ends, the
+    cycle is the whole curve's, every joint's lines are in place, the trace runs on across the
+    windows, and `check` passes it."""
+    from click.testing import CliRunner
+
+    from nurbsfeed.cli import main
+
     monkeypatch.setattr(chains, "MAX_WINDOW_CURVES", 4)
     pieces, whole = _pieces("butterfly.json", 10)
-    text = gcode_chain(pieces, 12000.0, "fanuc", [[f"(joint {j + 1})"] for j in range(9)])
+    text = gcode_chain(pieces, 12000.0, dialect, [[f"(joint {j + 1})"] for j in range(9)])
     out, rows, cycle = _convert(tmp_path, "long.nc", text)
     comments = [line for line in out.splitlines() if line.startswith("(nurbsfeed: curve")]
     assert len(comments) >= 3 and all("chained" in c for c in comments)
-    assert [f"(joint {j + 1})" in out for j in range(9)] == [True] * 9
-    # the first window: 5 curves gathered (one more than 4), cut at joint 2 or 3 (its second
-    # half), whichever is more curved
+    assert all(c.endswith(", runs on)") for c in comments[:-1])
+    assert not comments[-1].endswith(", runs on)")
+    assert [out.count(f"(joint {j + 1})") for j in range(9)] == [1] * 9
+    # the first window writes curves 0 to its cut, at joint 2 or 3 (its second half),
+    # whichever is more curved: the next starts inside the cut's curve
     kappa = [max(_kappa_at(pieces[j], pieces[j].knots[-1]),
                  _kappa_at(pieces[j + 1], pieces[j + 1].knots[0])) for j in range(9)]
-    cut = 2 + int(np.argmax(kappa[2:4]))
-    assert comments[0].startswith(f"(nurbsfeed: curves 0-{cut} chained")
-    # the windows' rests: v = 0 at each window's last point, and the trace's curve column
-    # still counts the pieces in file order
+    cut_at = 2 + int(np.argmax(kappa[2:4]))
+    assert comments[0].startswith(f"(nurbsfeed: curves 0-{cut_at} chained")
+    assert comments[1].startswith(f"(nurbsfeed: curves {cut_at}-")
+    # one trace row a period across the windows, k and t running on, the curve column counting
+    # the pieces in file order; at rest only at the chain's two ends
+    assert np.array_equal(rows[:, 1], np.arange(rows.shape[0]))
     assert sorted(set(rows[:, 0].astype(int))) == list(range(10))
-    assert np.count_nonzero(np.abs(rows[:, 5]) < 1e-9) >= 2 * len(comments)
+    still = np.flatnonzero(np.abs(rows[:, 5]) < 1e-9)
+    assert np.all((still < 3) | (still >= rows.shape[0] - 3)), still
+    whole_cycle = _convert(tmp_path, "whole.nc", gcode_chain([whole], 12000.0, dialect))[2]
+    assert cycle == pytest.approx(whole_cycle, rel=2e-3)
+    ok = CliRunner().invoke(main, ["check", str(tmp_path / "long.nc"),
+                                   str(tmp_path / "long.nc.out")], catch_exceptions=False)
+    assert ok.exit_code == 0, ok.stdout
 
 
 def test_check_judges_a_chain_and_its_joints_lines(tmp_path: Path) -> None:

@@ -19,10 +19,11 @@ from nurbsfeed.machine import Machine
 from nurbsfeed.pipeline import chain_block
 from nurbsfeed.program import CurveBlock, PassThrough
 from nurbsfeed.readers import read_program
+from nurbsfeed.windowed import windows_run_on
 
 COMMENT_RE = re.compile(r"\(nurbsfeed: curves? (\d+)(?:-\d+ chained,)? (.*), (\d+) points, "
                         r"period ([0-9.eE+-]+) ms, (\w+), length ([0-9.]+) (mm|in), "
-                        r"planned cycle ([0-9.]+) s\)$")
+                        r"planned cycle ([0-9.]+) s(, runs on)?\)$")
 ZERO_LENGTH_LINE = ZERO_LENGTH_COMMENT  # pipeline.convert_block
 MOVE_LINE_RE = re.compile(r"(?:G0*1(?![0-9.])\s*)?(?:[XYZF]\s*[-+]?[0-9.]*\s*)+")
 WORD_RE = re.compile(r"([A-Z])\s*([-+]?[0-9.]*)")
@@ -42,6 +43,8 @@ class Section:
     period_ms: float
     zero_length: bool
     moves: list[tuple[int, str]] = field(default_factory=list)  # (line number, text)
+    runs_on: bool = False  # its last part's comment says the next section continues it
+    joints_done: int = 0  # the chain's joints whose lines its parts have read
 
 
 def split_lines(text: str, ending: str) -> list[str]:
@@ -81,7 +84,16 @@ def source_tokens(path: Path, machine: Machine, dialect: str
     # split as the reader split them (the lines the JSON reader writes hold no "\r")
     source = InputFile(path)
     ending = "\r" if source.cr_only else "\n"
+    run: list[ChainWindow] = []  # the windows of a chain that run on into each other
     for item in chain_items(read_program(source, dialect), machine):
+        if isinstance(item, ChainWindow) and (item.ahead or run) and windows_run_on(machine):
+            run.append(item)
+            if item.ahead:
+                continue
+            item = ChainWindow(tuple(b for w in run for b in w.blocks),
+                               tuple(lines for w in run for lines in (
+                                   *w.between, *(w.ahead_between[:1] if w.ahead else ()))))
+            run = []
         block = None if isinstance(item, PassThrough) else item.blocks[0]
         if isinstance(item, PassThrough) or (block is not None and block.rapid_to_start):
             text = item.text if isinstance(item, PassThrough) else rapid_line(
@@ -101,6 +113,11 @@ def source_tokens(path: Path, machine: Machine, dialect: str
             joint_lines[section] = [[line for passed in at for line in split_lines(passed.text,
                                                                                    ending)]
                                     for at in item.between]
+            if item.ahead:  # a window at rest at its cut: the lines there follow it
+                for passed in item.ahead_between[0]:
+                    for line in split_lines(passed.text, ending):
+                        tokens.append(("line", line))
+                        following[section].append(line)
     return tokens, blocks, following, joint_lines
 
 
@@ -129,8 +146,17 @@ def parse_output(lines: list[str], blocks: list[CurveBlock], following: dict[int
             token_lines.append(i + 1)
             i += 1
             continue
+        if sections and sections[-1].runs_on:  # the next part of a chain run on in windows
+            section = sections[-1]
+            section.runs_on = match[9] is not None
+            section.n_points += int(match[3])
+            block = blocks[section.index] if section.index < len(blocks) else None
+            i = _parse_section(lines, i + 1, section, block, following.get(section.index, []),
+                               findings, (joint_lines or {}).get(section.index, []))
+            continue
         index = int(match[1])
-        section = Section(index, i + 1, int(match[3]), float(match[4]), False)
+        section = Section(index, i + 1, int(match[3]), float(match[4]), False,
+                          runs_on=match[9] is not None)
         tokens.append(("curve", index))
         token_lines.append(i + 1)
         sections.append(section)
@@ -150,13 +176,13 @@ def _parse_section(lines: list[str], i: int, section: Section, block: CurveBlock
     incremental = block is not None and block.incremental
     restore = (block.feed_word_after + block.eol
                if block is not None and block.feed_word_after else None)
-    if incremental:
+    if incremental and not section.moves:
         if i < len(lines) and body(lines[i]) == "G90":
             i += 1
         else:
             findings.add("g90-g91", i + 1, G90_G91_MESSAGE)
     first = i
-    joint = 0
+    joint = section.joints_done
     at_joints: list[int] = []  # the line indices of the joints' lines, not moves
     while i < len(lines):
         while joint < len(joints) and not joints[joint]:
@@ -171,6 +197,11 @@ def _parse_section(lines: list[str], i: int, section: Section, block: CurveBlock
             break
     while joint < len(joints) and not joints[joint]:
         joint += 1
+    section.joints_done = joint
+    if section.runs_on:  # the next part goes on with the moves, the joints and the ending
+        skip = set(at_joints)
+        section.moves += [(n + 1, lines[n]) for n in range(first, i) if n not in skip]
+        return i
     if joint < len(joints):
         findings.add("pass-through", i + 1, f"the lines of joint {joint + 1} of the chain are "
                      f"missing among its moves: {body(joints[joint][0])!r}")
@@ -183,7 +214,7 @@ def _parse_section(lines: list[str], i: int, section: Section, block: CurveBlock
                 i -= k
                 break
     skip = set(at_joints)
-    section.moves = [(n + 1, lines[n]) for n in range(first, i) if n not in skip]
+    section.moves += [(n + 1, lines[n]) for n in range(first, i) if n not in skip]
     if incremental:
         if i < len(lines) and body(lines[i]) == "G91":
             i += 1
