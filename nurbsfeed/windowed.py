@@ -36,7 +36,8 @@ from nurbsfeed.safety import MotionGuard, feed_cap_mm_s, slowdown_from_points
 from nurbsfeed.trace import write_trace_rows
 from nurbsfeed.verified import _checked_block
 
-RUNS_ON = ", runs on"  # the comment of a window the next one runs on from (check joins them)
+# the comment of a window the next section continues (the chain goes on: check joins them)
+CONTINUED = ", continued"
 KNOT_CLEARANCE = 1e-3  # of a piece's span: how near a knot a hand-on point may lie
 HAND_ON_TRIES = 16  # points before the cut tried as the hand-on point
 
@@ -170,9 +171,10 @@ def _next_start(planned: _Planned, method: str) -> tuple[_Start, int] | None:
     return _Start(tail, lines, ends, seed), k
 
 
-def _write(planned: _Planned, out: ChainOutput, index: int, upto: int | None) -> None:
+def _write(planned: _Planned, out: ChainOutput, index: int, upto: int | None,
+           continued: bool) -> None:
     """Write the planned window's points after its first, up to point `upto` (None: all), with
-    the lines at the joints it crosses."""
+    the lines at the joints it crosses; continued: the next section goes on with the chain."""
     machine, plan, block = out.machine, planned.plan, planned.block
     eol = block.eol.encode("ascii")
     period_s = plan.limits.period_s
@@ -189,8 +191,8 @@ def _write(planned: _Planned, out: ChainOutput, index: int, upto: int | None) ->
     comment = chain_comment(index, index + n_curves - 1, block.curve.name,
                             last + (1 if first_part else 0), period_s, out.method,
                             last * period_s, length, block.units)
-    if upto is not None:
-        comment = comment[:-1] + RUNS_ON + comment[-1:]
+    if continued:
+        comment = comment[:-1] + CONTINUED + comment[-1:]
     if out.writer is not None:
         out.writer.end_curve()
     out.out.write(comment_line(comment, block.semicolon_comments).encode(ENCODING, ERRORS) + eol)
@@ -250,12 +252,47 @@ def _write(planned: _Planned, out: ChainOutput, index: int, upto: int | None) ->
     out.cycle_s += last * period_s
 
 
+def _drop(window: ChainWindow, k: int
+          ) -> tuple[ChainWindow | None, tuple[PassThrough, ...], int]:
+    """The window without its first k curves, which the last window wrote (its look-ahead):
+    what is left of it (None: nothing), the lines at the joint where the writing ended (to come
+    now), and how many of the next window's curves are written too."""
+    n = len(window.blocks)
+    if k < n:
+        return (ChainWindow(window.blocks[k:], window.between[k:], window.ahead,
+                            window.ahead_between), window.between[k - 1], 0)
+    if k == n:
+        return None, window.ahead_between[0] if window.ahead else (), 0
+    return None, (), k - n
+
+
+def _lines_at_rest(out: ChainOutput, lines: tuple[PassThrough, ...]) -> None:
+    if not lines:
+        return
+    if out.writer is not None:
+        out.writer.end_curve()
+    out.out.write(b"".join(line.text.encode(ENCODING, ERRORS) for line in lines))
+    if out.writer is not None and any(line.words for line in lines):
+        out.writer.after_lines()
+
+
 def convert_windows(windows, out: ChainOutput, index: int) -> int:
     """Convert the windows of one chain (each but the last with a look-ahead), in order; returns
-    the index after its last curve."""
-    start = _Start(None, (), AT_REST, None)
+    the index after its last curve. Where the next window cannot be planned from the hand-on
+    point, the last one is written whole, through its look-ahead to its own rest, and the next
+    starts after it from rest."""
     pending: _Planned | None = None
-    for window in windows:
+    skip = 0
+    last_block: CurveBlock | None = None
+    for given in windows:
+        last_block = (given.ahead or given.blocks)[-1]
+        window = given
+        if skip:
+            dropped, lines_now, skip = _drop(given, skip)
+            _lines_at_rest(out, lines_now)
+            if dropped is None:
+                continue
+            window = dropped
         if pending is not None:
             made = _next_start(pending, out.method)
             nxt = None
@@ -263,34 +300,34 @@ def convert_windows(windows, out: ChainOutput, index: int) -> int:
                 nxt_start, k = made
                 nxt = _plan(window, nxt_start, out.machine, out.method, bool(window.ahead))
             if nxt is not None:
-                _write(pending, out, index, k)
+                _write(pending, out, index, k, True)
                 index += len(pending.blocks) - len(pending.window.ahead) - 1
             else:
-                # the last window to rest at its cut, whole; this one from rest
-                short = _plan(pending.window, pending.start, out.machine, out.method, False)
-                if short is None:
-                    raise CurveError("a window of a chain could not be planned again to rest",
-                                     pending.block.location)
-                _write(short, out, index, None)
-                index += len(short.blocks)
-                if out.writer is not None:
-                    out.writer.end_curve()
-                out.out.write(b"".join(line.text.encode(ENCODING, ERRORS)
-                                       for line in pending.window.ahead_between[0]))
+                # the last window whole, to its own rest; this one after it, from rest
+                skip = len(pending.window.ahead)
+                rest_of, _, _ = _drop(window, skip)
+                _write(pending, out, index, None, rest_of is not None or bool(window.ahead))
+                index += len(pending.blocks)
+                dropped, lines_now, skip = _drop(window, skip)
+                _lines_at_rest(out, lines_now)
+                pending = None
+                if dropped is None:
+                    continue
+                window = dropped
                 nxt = _plan(window, _Start(None, (), AT_REST, None), out.machine, out.method,
                             bool(window.ahead))
             pending = nxt
         else:
-            pending = _plan(window, start, out.machine, out.method, bool(window.ahead))
+            pending = _plan(window, _Start(None, (), AT_REST, None), out.machine, out.method,
+                            bool(window.ahead))
         if pending is None:
             raise CurveError("a window of a chain could not be planned", window.blocks[0].location)
         if not window.ahead:
-            _write(pending, out, index, None)
+            _write(pending, out, index, None, False)
             index += len(pending.blocks)
-            if out.writer is not None:
-                out.writer.end_curve()
-            if pending.block.feed_word_after:
-                eol = pending.block.eol
-                out.out.write((pending.block.feed_word_after + eol).encode(ENCODING, ERRORS))
             pending = None
+    if out.writer is not None:
+        out.writer.end_curve()
+    if last_block is not None and last_block.feed_word_after:
+        out.out.write((last_block.feed_word_after + last_block.eol).encode(ENCODING, ERRORS))
     return index

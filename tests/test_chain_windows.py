@@ -10,16 +10,20 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
+from nurbsfeed import chains
 from nurbsfeed.analysis.common import curve_blocks
 from nurbsfeed.interpolate.stepping import interpolate
 from nurbsfeed.machine import load_machine
-from nurbsfeed.pipeline import POSITION_REL
+from nurbsfeed.pipeline import POSITION_REL, convert_file
 from nurbsfeed.planning.basis import ChainEnds
 from nurbsfeed.planning.chain import curve_after
 from nurbsfeed.planning.planner import plan_curve, plan_window
 from nurbsfeed.planning.window import hand_on
 from nurbsfeed.safety import slowdown_from_points
+from tests.bench import programs
 from tests.bench.dense_curves import dense_curves
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -86,3 +90,38 @@ def test_what_cannot_be_handed_on_says_so() -> None:
     assert hand_on(scurve, scurve.n_periods // 2) is None
     plan = plan_curve(curve, lim)
     assert hand_on(plan, 0) == (ChainEnds(), None)
+
+
+@settings(max_examples=40, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(seed=st.integers(0, 10**6), n_curves=st.integers(6, 40), window=st.integers(2, 8),
+       turn=st.floats(0.0, 0.3), step=st.floats(0.5, 6.0), feed=st.sampled_from([600, 6000]))
+def test_random_long_chains_run_on_within_every_limit(tmp_path: Path, seed: int, n_curves: int,
+                                                      window: int, turn: float, step: float,
+                                                      feed: int) -> None:
+    """Chained programs of random smooth paths (tests/bench/programs.py's, heading and span
+    drawn), in windows of 2 to 8 curves: each converts, `check` passes it (every limit from the
+    written positions, every joint's lines in place, one result per curve), and it is never
+    slower than the same program in windows that rest at their cuts."""
+    from click.testing import CliRunner
+
+    import nurbsfeed.pipeline as pipeline_module
+    from nurbsfeed.cli import main
+
+    with pytest.MonkeyPatch.context() as patch:  # (per example: hypothesis runs many in one)
+        patch.setattr(chains, "MAX_WINDOW_CURVES", window)
+        patch.setattr(programs, "CHAIN_TURN_RAD", turn)
+        patch.setattr(programs, "CHAIN_STEP_MM", step)
+        text = programs.chained_program(n_curves, seed).replace("F6000.", f"F{feed}.")
+        source = tmp_path / "chain.nc"
+        source.write_text(text)
+        target = tmp_path / "chain.out"
+        report = convert_file(source, target, DEFAULT)
+        assert [c.index for c in report.curves] == list(range(n_curves))
+        assert sum(c.n_points for c in report.curves) == report.n_points
+        ok = CliRunner().invoke(main, ["check", str(source), str(target)],
+                                catch_exceptions=False)
+        assert ok.exit_code == 0, ok.stdout[-3000:]
+        patch.setattr(pipeline_module, "windows_run_on", lambda machine: False)
+        resting = convert_file(source, tmp_path / "rest.out", DEFAULT)
+    assert report.cycle_time_s <= resting.cycle_time_s + DEFAULT.limits.period_s

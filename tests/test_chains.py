@@ -346,8 +346,8 @@ def test_long_chains_are_planned_in_windows_that_run_on_into_each_other(
     out, rows, cycle = _convert(tmp_path, "long.nc", text)
     comments = [line for line in out.splitlines() if line.startswith("(nurbsfeed: curve")]
     assert len(comments) >= 3 and all("chained" in c for c in comments)
-    assert all(c.endswith(", runs on)") for c in comments[:-1])
-    assert not comments[-1].endswith(", runs on)")
+    assert all(c.endswith(", continued)") for c in comments[:-1])
+    assert not comments[-1].endswith(", continued)")
     assert [out.count(f"(joint {j + 1})") for j in range(9)] == [1] * 9
     # the first window writes curves 0 to its cut, at joint 2 or 3 (its second half),
     # whichever is more curved: the next starts inside the cut's curve

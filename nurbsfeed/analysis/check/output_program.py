@@ -23,7 +23,7 @@ from nurbsfeed.windowed import windows_run_on
 
 COMMENT_RE = re.compile(r"\(nurbsfeed: curves? (\d+)(?:-\d+ chained,)? (.*), (\d+) points, "
                         r"period ([0-9.eE+-]+) ms, (\w+), length ([0-9.]+) (mm|in), "
-                        r"planned cycle ([0-9.]+) s(, runs on)?\)$")
+                        r"planned cycle ([0-9.]+) s(, continued)?\)$")
 ZERO_LENGTH_LINE = ZERO_LENGTH_COMMENT  # pipeline.convert_block
 MOVE_LINE_RE = re.compile(r"(?:G0*1(?![0-9.])\s*)?(?:[XYZF]\s*[-+]?[0-9.]*\s*)+")
 WORD_RE = re.compile(r"([A-Z])\s*([-+]?[0-9.]*)")
