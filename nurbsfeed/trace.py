@@ -1,5 +1,5 @@
 """The --trace CSV (design §5): a row per interpolation point at full precision, written chunk
-by chunk beside the G-code (pipeline.convert_window).
+by chunk beside the G-code (pipeline.convert_window, windowed.convert_windows).
 """
 
 from __future__ import annotations

@@ -1,12 +1,15 @@
-"""A long chain converted in overlapping windows that run on into each other (design §3b, "Long
-chains"; a prototype on branch chain-windows: the default profile's path, no rest-move merging,
-no trace, `check` not taught yet).
+"""A long chain converted in windows that run on into each other (design §3b, "Long chains").
 
-Each window is planned with its look-ahead (the curves after its cut) to rest at the look-ahead's
-end, and written up to its last point before the cut; the next window starts there, with the rest
-of that curve, moving in the state the law had there (planning.window.hand_on). Where the next
-window cannot be planned so, the window is planned again without its look-ahead, to rest at
-its cut, written whole, and the next starts from rest: today's windows.
+Each window is planned with its look-ahead (the curves after its cut) to rest at the
+look-ahead's end, held until the next window has planned, then written up to its last point
+before the cut that keeps clear of every knot; the next window starts there, with the rest of
+that curve (planning.chain.curve_after), moving in the state the law had there, seeded with the
+last plan's cells (planning.window.hand_on). Where the next window cannot be planned so, the
+last one is written whole, through its look-ahead to its own rest, and the next starts after it
+from rest: the one bounded fallback. One writer, motion guard and trace run on across the
+windows; the comment of a section the next one goes on from ends with CONTINUED, which `check`
+reads to join them. Not under a profile that merges the moves beside a rest
+(`windows_run_on`): there each window rests at its cut, as pipeline.convert_window plans it.
 """
 
 from __future__ import annotations

@@ -406,10 +406,10 @@ def test_a_speed_above_the_feed_by_less_than_the_acceleration_margin_is_slowed(
     over, which the verification from the points let pass (its margin, 0.5 %, is the
     accelerations') and the motion guard refused (its margin on a speed is 0.1 %). A speed
     above the feed by more than half the guard's margin slows the law by what it asks."""
-    import nurbsfeed.pipeline as pipeline
+    import nurbsfeed.verified as verified
 
     asked = iter([(1.001, 1.0), (1.0, 1.0)])
-    monkeypatch.setattr(pipeline, "slowdown_from_points", lambda lim, chunks: next(asked))
+    monkeypatch.setattr(verified, "slowdown_from_points", lambda lim, chunks: next(asked))
     curve = NurbsCurve.build(3, [0, 0, 0, 0, 1, 1, 1, 1],
                              [[0, 0, 0], [10, 5, 0], [20, -5, 0], [30, 0, 0]])
     lim = DEFAULT.limits

@@ -45,7 +45,7 @@ OPEN_SLOWDOWN_REL = 1e-6
 # was braking at its limits, no schedule from the state it hands on may keep them exactly. It
 # is planned again with every limit within START_SLACK_MM (the distance it may take to
 # brake, `start_slack_mm`) of its start loosened by START_SLACK_REL, what the conversion's look
-# at the points allows any plan (pipeline.POSITION_REL), rather than coming to rest.
+# at the points allows any plan (verified.POSITION_REL), rather than coming to rest.
 START_SLACK_REL = 0.005
 
 

@@ -16,7 +16,7 @@ The profile key `planner` chooses the planner, `jerk_model` what the machine's l
   curves merged into one: at rest at both ends, or (`chain_schedule`) moving at either in a
   given state, for a chain planned in windows.
 
-Every plan then goes to `pipeline.verified_plan`, which steps it and reads its points as
+Every plan then goes to `verified.verified_plan`, which steps it and reads its points as
 positions; the motion guard (`safety`) refuses what is still above a limit.
 """
 
@@ -42,7 +42,7 @@ def plan_curve(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray = np.empty(0),
                extra_slowdown: float = 1.0) -> Plan:
     """Plan the feed along one curve under `lim` (feed cap already in lim.feed_mm_s).
     extra_slowdown: a uniform slowdown the law takes on top of its own (the pipeline's check
-    from the points asks for it, `pipeline.verified_plan`).
+    from the points asks for it, `verified.verified_plan`).
 
     CurveError (without a place) when the planned cycle exceeds max_curve_time_s or is not a
     finite number of periods: checked on a lower bound of the cycle before planning, then on
