@@ -25,6 +25,7 @@ from typing import BinaryIO
 
 import numpy as np
 
+from nurbsfeed import windowed
 from nurbsfeed.chains import ChainWindow, chain_block, chain_items
 from nurbsfeed.errors import CurveError, InputError, Location
 from nurbsfeed.files import ENCODING, ERRORS, atomic_output
@@ -55,7 +56,7 @@ from nurbsfeed.verified import (
     plan_block,
     verified_plan,
 )
-from nurbsfeed.windowed import ChainOutput, convert_windows, windows_run_on
+from nurbsfeed.windowed import ChainOutput, convert_windows
 
 # what callers read from here (planning, checking and merging live beside it)
 __all__ = ["POSITION_REL", "POSITION_ROUNDS", "POSITION_SPEED_REL", "CurveResult", "FileReport",
@@ -105,7 +106,7 @@ def convert_stream(items: Iterator[ProgramItem], out: BinaryIO, machine: Machine
         if isinstance(item, PassThrough):
             out.write(item.text.encode(ENCODING, ERRORS))
             continue
-        if item.ahead and windows_run_on(machine):
+        if item.ahead and windowed.RUN_ON:
             output = ChainOutput(out, machine, method, trace)
             named: list[CurveBlock] = []  # the chain's curves, in order (for their results)
             start = index

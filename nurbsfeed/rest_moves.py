@@ -87,6 +87,18 @@ class RestMoves:
         self.held_u, self.held_points = u[ready:], points[ready:]
         return np.concatenate(done) if done else np.empty((0, 3))
 
+    def hand_on(self) -> np.ndarray:
+        """The held points as they are: the motion runs on into the next window of a chain
+        (nurbsfeed.windowed), so no rest follows them, and its first move is not one from a
+        rest."""
+        points = self.held_points
+        if len(points):
+            self.anchor_u, self.anchor_point = float(self.held_u[-1]), points[-1]
+        self.held_u, self.held_points = np.empty(0), np.empty((0, 3))
+        self.stretch = None
+        self.at_rest = False
+        return points
+
     def finish(self) -> np.ndarray:
         """The held points, which end at a rest: the last move into it merged."""
         u, points = self.held_u, self.held_points

@@ -7,9 +7,9 @@ that curve (planning.chain.curve_after), moving in the state the law had there, 
 last plan's cells (planning.window.hand_on). Where the next window cannot be planned so, the
 last one is written whole, through its look-ahead to its own rest, and the next starts after it
 from rest: the one bounded fallback. One writer, motion guard and trace run on across the
-windows; the comment of a section the next one goes on from ends with CONTINUED, which `check`
-reads to join them. Not under a profile that merges the moves beside a rest
-(`windows_run_on`): there each window rests at its cut, as pipeline.convert_window plans it.
+windows, and so does the merging of the moves beside a rest (rest_moves, `RestMoves.hand_on`);
+the comment of a section the next one goes on from ends with CONTINUED, which `check` reads to
+join them.
 """
 
 from __future__ import annotations
@@ -35,6 +35,7 @@ from nurbsfeed.planning.plan import Plan
 from nurbsfeed.planning.planner import plan_window
 from nurbsfeed.planning.window import Seed, hand_on
 from nurbsfeed.program import CurveBlock, PassThrough
+from nurbsfeed.rest_moves import RestMoves, rest_move_periods
 from nurbsfeed.safety import MotionGuard, feed_cap_mm_s, slowdown_from_points
 from nurbsfeed.trace import write_trace_rows
 from nurbsfeed.verified import _checked_block
@@ -45,12 +46,9 @@ KNOT_CLEARANCE = 1e-3  # of a piece's span: how near a knot a hand-on point may 
 HAND_ON_TRIES = 16  # points before the cut tried as the hand-on point
 
 
-def windows_run_on(machine: Machine) -> bool:
-    """Whether a conversion under `machine` runs a long chain's windows on into each other
-    (the prototype: not where moves beside a rest are merged)."""
-    from nurbsfeed.rest_moves import rest_move_periods
-
-    return rest_move_periods(machine) == 1
+# a long chain's windows run on into each other; False plans each to rest at its cut (what
+# the conversion did before, and what the tests compare it with): pipeline and check read it
+RUN_ON = True
 
 
 @dataclass
@@ -90,6 +88,9 @@ class ChainOutput:
         self.cycle_s = 0.0
         self.trace_s = 0.0
         self.curves: list[tuple[int, int, float]] = []
+        periods = rest_move_periods(machine)
+        self.rest_periods = periods if periods > 1 else 0
+        self.rest: RestMoves | None = None
 
 
 def _plan(window: ChainWindow, start: _Start, machine: Machine, method: str,
@@ -204,6 +205,10 @@ def _write(planned: _Planned, out: ChainOutput, index: int, upto: int | None,
                                 block.eol, block.curve.points[0], block.units)
         out.guard = MotionGuard(dataclasses.replace(
             plan.limits, feed_mm_s=feed_cap_mm_s(plan.limits, block)), block.curve.name)
+        if out.rest_periods:
+            out.rest = RestMoves(block.curve, plan.limits.chord_mm, out.rest_periods)
+    if out.rest is not None:
+        out.rest.curve = block.curve  # (no point of the last window is held: `hand_on`)
     between = planned.between[:len(planned.blocks) - 1]
     lines = JointLines(out.writer, out.out, tuple(between))
     joint_u = planned.chain.joint_u
@@ -212,6 +217,8 @@ def _write(planned: _Planned, out: ChainOutput, index: int, upto: int | None,
             if first_part and out.trace is not None:
                 out.trace_s = write_trace_rows(out.trace, index, chunk, period_s, out.trace_s,
                                                planned.chain)
+            if out.rest is not None:
+                out.rest.take(chunk)  # where the first move starts
             continue
         ks = np.arange(chunk.k0, chunk.k0 + chunk.u.size)
         keep = ks <= last
@@ -233,7 +240,7 @@ def _write(planned: _Planned, out: ChainOutput, index: int, upto: int | None,
         while len(lines.crossings) < joint_u.size and u[-1] > joint_u[len(lines.crossings)]:
             before = int(np.searchsorted(u, joint_u[len(lines.crossings)], side="right"))
             lines.crossings.append(chunk.k0 + before - 1)
-        lines.add(points)
+        lines.add(out.rest.take(chunk) if out.rest is not None else points)
         if ks[-1] >= last:
             break
     crossed = list(lines.crossings)
@@ -241,8 +248,12 @@ def _write(planned: _Planned, out: ChainOutput, index: int, upto: int | None,
         while len(lines.crossings) < joint_u.size:  # a joint at the end: no length after it
             lines.crossings.append(last)
         crossed = list(lines.crossings)
+        if out.rest is not None:
+            lines.add(out.rest.finish())
         lines.add(np.empty((0, 3)))
         lines.finish()
+    elif out.rest is not None:
+        lines.add(out.rest.hand_on())
     ends_k = crossed[:n_curves - 1] + [last]
     grid = plan.grid
     ends_s = [*np.interp(planned.chain.joint_u[:n_curves - 1], grid.u, grid.s_mm).tolist(),

@@ -105,7 +105,7 @@ def test_random_long_chains_run_on_within_every_limit(tmp_path: Path, seed: int,
     slower than the same program in windows that rest at their cuts."""
     from click.testing import CliRunner
 
-    import nurbsfeed.pipeline as pipeline_module
+    from nurbsfeed import windowed
     from nurbsfeed.cli import main
 
     with pytest.MonkeyPatch.context() as patch:  # (per example: hypothesis runs many in one)
@@ -122,6 +122,6 @@ def test_random_long_chains_run_on_within_every_limit(tmp_path: Path, seed: int,
         ok = CliRunner().invoke(main, ["check", str(source), str(target)],
                                 catch_exceptions=False)
         assert ok.exit_code == 0, ok.stdout[-3000:]
-        patch.setattr(pipeline_module, "windows_run_on", lambda machine: False)
+        patch.setattr(windowed, "RUN_ON", False)
         resting = convert_file(source, tmp_path / "rest.out", DEFAULT)
     assert report.cycle_time_s <= resting.cycle_time_s + DEFAULT.limits.period_s

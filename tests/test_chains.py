@@ -37,6 +37,7 @@ from tests.naive_nurbs import evaluate
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLES = ROOT / "samples"
 DEFAULT = load_machine("default")
+CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 CYCLE_REL = 0.01  # the issue's bound: a chain within 1 % of the whole curve's cycle
 POSITION_REL = 0.02  # v, a, j measured from positions within 2 % of each axis's limit
 
@@ -327,23 +328,26 @@ def _kappa_at(piece: Piece, u: float) -> float:
     return float(np.linalg.norm(np.cross(c1, c2)) / np.linalg.norm(c1) ** 3)
 
 
-@pytest.mark.parametrize("dialect", ["fanuc", "linuxcnc"])
+@pytest.mark.parametrize(("dialect", "profile"), [("fanuc", "default"), ("linuxcnc", "default"),
+                                                  ("linuxcnc", "linuxcnc")])
 def test_long_chains_are_planned_in_windows_that_run_on_into_each_other(
-        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, dialect: str) -> None:
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, dialect: str, profile: str) -> None:
     """Windows of at most MAX_WINDOW_CURVES curves, each cut at the most curved joint in its
     second half (curvature from the textbook evaluator here), planned with the curves after
     its cut as look-ahead and written up to its last point before the cut; the next one runs on
     from there moving (nurbsfeed.windowed): the motion rests only at the chain's ends, the
     cycle is the whole curve's, every joint's lines are in place, the trace runs on across the
-    windows, and `check` passes it."""
+    windows, and `check` passes it; under the linuxcnc profile the moves beside its two rests
+    are merged (rest_moves) and none at a hand-on."""
     from click.testing import CliRunner
 
     from nurbsfeed.cli import main
 
     monkeypatch.setattr(chains, "MAX_WINDOW_CURVES", 4)
+    machine = DEFAULT if profile == "default" else load_machine(str(CONFIGS / "linuxcnc.yaml"))
     pieces, whole = _pieces("butterfly.json", 10)
     text = gcode_chain(pieces, 12000.0, dialect, [[f"(joint {j + 1})"] for j in range(9)])
-    out, rows, cycle = _convert(tmp_path, "long.nc", text)
+    out, rows, cycle = _convert(tmp_path, "long.nc", text, machine)
     comments = [line for line in out.splitlines() if line.startswith("(nurbsfeed: curve")]
     assert len(comments) >= 3 and all("chained" in c for c in comments)
     assert all(c.endswith(", continued)") for c in comments[:-1])
@@ -362,10 +366,12 @@ def test_long_chains_are_planned_in_windows_that_run_on_into_each_other(
     assert sorted(set(rows[:, 0].astype(int))) == list(range(10))
     still = np.flatnonzero(np.abs(rows[:, 5]) < 1e-9)
     assert np.all((still < 3) | (still >= rows.shape[0] - 3)), still
-    whole_cycle = _convert(tmp_path, "whole.nc", gcode_chain([whole], 12000.0, dialect))[2]
+    whole_cycle = _convert(tmp_path, "whole.nc", gcode_chain([whole], 12000.0, dialect),
+                           machine)[2]
     assert cycle == pytest.approx(whole_cycle, rel=2e-3)
     ok = CliRunner().invoke(main, ["check", str(tmp_path / "long.nc"),
-                                   str(tmp_path / "long.nc.out")], catch_exceptions=False)
+                                   str(tmp_path / "long.nc.out"), "--machine",
+                                   str(CONFIGS / f"{profile}.yaml")], catch_exceptions=False)
     assert ok.exit_code == 0, ok.stdout
 
 

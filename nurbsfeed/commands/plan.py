@@ -50,7 +50,6 @@ def plan(input: Path, dialect: str, reference: bool, **kwargs: Any) -> None:
     from nurbsfeed.pipeline import chain_block, joint_speeds, plan_block
     from nurbsfeed.planning.plan import KIND_NAMES, SCurveDiagnostics
     from nurbsfeed.readers import read_program
-    from nurbsfeed.windowed import windows_run_on
 
     if reference:
         try:
@@ -106,11 +105,9 @@ def plan(input: Path, dialect: str, reference: bool, **kwargs: Any) -> None:
         if reference and bound > 0:
             click.echo(_reference_line(item, machine, p.cycle_time_s, bound))
         if window.ahead:
-            how = ("runs on into the next window from its last point before the joint after "
-                   f"curve {index + n_curves - 1}" if windows_run_on(machine) else
-                   f"rests at the joint after curve {index + n_curves - 1}, as planned here")
-            click.echo(f"  a window of a longer chain: the conversion {how} (docs/design.md "
-                       "§3b)")
+            click.echo("  a window of a longer chain, planned here to rest at its cut: the "
+                       "conversion runs on into the next window from its last point before "
+                       f"the joint after curve {index + n_curves - 1} (docs/design.md §3b)")
         index += n_curves
     if index == 0:
         click.echo("no NURBS curves in the input")

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from nurbsfeed import windowed
 from nurbsfeed.analysis.check.report import Findings
 from nurbsfeed.chains import ChainWindow, chain_items
 from nurbsfeed.files import InputFile
@@ -19,7 +20,6 @@ from nurbsfeed.machine import Machine
 from nurbsfeed.pipeline import chain_block
 from nurbsfeed.program import CurveBlock, PassThrough
 from nurbsfeed.readers import read_program
-from nurbsfeed.windowed import windows_run_on
 
 COMMENT_RE = re.compile(r"\(nurbsfeed: curves? (\d+)(?:-\d+ chained,)? (.*), (\d+) points, "
                         r"period ([0-9.eE+-]+) ms, (\w+), length ([0-9.]+) (mm|in), "
@@ -86,7 +86,7 @@ def source_tokens(path: Path, machine: Machine, dialect: str
     ending = "\r" if source.cr_only else "\n"
     run: list[ChainWindow] = []  # the windows of a chain that run on into each other
     for item in chain_items(read_program(source, dialect), machine):
-        if isinstance(item, ChainWindow) and (item.ahead or run) and windows_run_on(machine):
+        if isinstance(item, ChainWindow) and (item.ahead or run) and windowed.RUN_ON:
             run.append(item)
             if item.ahead:
                 continue
