@@ -24,7 +24,7 @@ from nurbsfeed.chains import ChainWindow, chain_block
 from nurbsfeed.errors import CurveError
 from nurbsfeed.files import ENCODING, ERRORS
 from nurbsfeed.gcode.profile_record import record_lines
-from nurbsfeed.gcode.writer import MoveWriter, chain_comment, comment_line
+from nurbsfeed.gcode.writer import MoveWriter, chain_comment, comment_line, rapid_line
 from nurbsfeed.interpolate.landing import Landing
 from nurbsfeed.interpolate.stepping import Stepping
 from nurbsfeed.joint_lines import JointLines
@@ -183,6 +183,9 @@ def _write(planned: _Planned, out: ChainOutput, index: int, upto: int | None,
     eol = block.eol.encode("ascii")
     period_s = plan.limits.period_s
     last = plan.n_periods if upto is None else upto
+    if out.writer is None and block.rapid_to_start:  # a JSON curve's G0 to its start
+        out.out.write(rapid_line(block.curve.points[0], machine.decimals, block.units)
+                      .encode("ascii") + eol)
     if index == 0 and out.writer is None:
         out.out.write(b"".join(comment_line(line, block.semicolon_comments).encode("ascii") + eol
                                for line in record_lines(machine)))
@@ -201,6 +204,8 @@ def _write(planned: _Planned, out: ChainOutput, index: int, upto: int | None,
         out.writer.end_curve()
     out.out.write(comment_line(comment, block.semicolon_comments).encode(ENCODING, ERRORS) + eol)
     if out.writer is None:
+        if block.incremental:  # the moves are absolute: bracketed by G90 ... G91
+            out.out.write(b"G90" + eol)
         out.writer = MoveWriter(out.out, machine.decimals, machine.feed_decimals, period_s,
                                 block.eol, block.curve.points[0], block.units)
         out.guard = MotionGuard(dataclasses.replace(
@@ -342,6 +347,8 @@ def convert_windows(windows, out: ChainOutput, index: int) -> int:
             pending = None
     if out.writer is not None:
         out.writer.end_curve()
+    if out.writer is not None and last_block is not None and last_block.incremental:
+        out.out.write(b"G91" + last_block.eol.encode("ascii"))
     if last_block is not None and last_block.feed_word_after:
         out.out.write((last_block.feed_word_after + last_block.eol).encode(ENCODING, ERRORS))
     return index

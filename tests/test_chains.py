@@ -492,3 +492,53 @@ def test_random_chains_merge_exactly_and_their_joints_turn_as_their_polygons(see
         turn = float(np.arccos(np.clip(cos, -1.0, 1.0)))
         assert found.turn_rad[j] == pytest.approx(turn, abs=1e-6)
         assert (found.cap_mm_s[j] == 0.0) == (turn > 1e-3)
+
+
+def _incremental(text: str) -> str:
+    """The program under G91 after its G0: every X Y Z the change from the point before."""
+    out, prev = [], np.zeros(3)
+    for line in text.splitlines():
+        words = line.split()
+        xyz = [w for w in words if w[0] in "XYZ"]
+        if line.startswith("G0 "):
+            prev = np.array([float(w[1:]) for w in xyz])
+            out += [line, "G91"]
+        elif len(xyz) == 3:
+            point = np.array([float(w[1:]) for w in xyz])
+            head = [w for w in words if w[0] in "GPK"]
+            tail = [w for w in words if w[0] in "RF"]
+            out.append(" ".join(head + [f"{a}{c:.9f}" for a, c in zip("XYZ", point - prev)]
+                                + tail))
+            prev = point
+        else:
+            out.append(line)
+    return "\n".join(out) + "\n"
+
+
+def test_a_long_chain_under_g91_runs_on_in_one_g90_bracket(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The butterfly in 10 G06.2 blocks under G91, in windows of 4 that run on: the absolute
+    moves of all its windows lie between one G90 and one G91, the chain's cycle is the whole
+    curve's, and `check` passes it (the G90/G91 bracket among its checks)."""
+    from click.testing import CliRunner
+
+    from nurbsfeed.cli import main
+
+    monkeypatch.setattr(chains, "MAX_WINDOW_CURVES", 4)
+    pieces, whole = _pieces("butterfly.json", 10)
+    source = tmp_path / "g91.nc"
+    source.write_text(_incremental(gcode_chain(pieces, 12000.0, "fanuc")))
+    target = tmp_path / "g91.out"
+    report = convert_file(source, target, DEFAULT)
+    out = target.read_text().splitlines()
+    assert sum(c.endswith(", continued)") for c in out) >= 2
+    g90 = [i for i, line in enumerate(out) if line == "G90"]
+    g91 = [i for i, line in enumerate(out) if line == "G91"]
+    moves = [i for i, line in enumerate(out) if line.startswith(("G1 ", "X", "Y"))]
+    assert len(g90) == 1 and len(g91) == 2  # the program's own G91, and the bracket's
+    assert g90[0] < moves[0] and moves[-1] < g91[1]
+    (tmp_path / "whole.nc").write_text(gcode_chain([whole], 12000.0, "fanuc"))
+    whole_report = convert_file(tmp_path / "whole.nc", tmp_path / "whole.out", DEFAULT)
+    assert report.cycle_time_s == pytest.approx(whole_report.cycle_time_s, rel=2e-3)
+    ok = CliRunner().invoke(main, ["check", str(source), str(target)], catch_exceptions=False)
+    assert ok.exit_code == 0, ok.stdout[-2000:]
