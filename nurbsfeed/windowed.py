@@ -38,7 +38,7 @@ from nurbsfeed.program import CurveBlock, PassThrough
 from nurbsfeed.rest_moves import RestMoves, rest_move_periods
 from nurbsfeed.safety import MotionGuard, feed_cap_mm_s, slowdown_from_points
 from nurbsfeed.trace import write_trace_rows
-from nurbsfeed.verified import _checked_block
+from nurbsfeed.verified import POSITION_REL, POSITION_SPEED_REL, _checked_block
 
 # the comment of a window the next section continues (the chain goes on: check joins them)
 CONTINUED = ", continued"
@@ -114,8 +114,10 @@ def _plan(window: ChainWindow, start: _Start, machine: Machine, method: str,
     plan = moving
     stepping = Stepping(plan, method)
     caps = dataclasses.replace(lim, feed_mm_s=min(feed_cap_mm_s(lim, block), lim.feed_mm_s))
+    # read from its points as any plan is (verified.verified_plan), but not slowed: its start
+    # is the state it was handed
     speed, asks = slowdown_from_points(caps, (chunk.points for chunk in stepping.chunks()))
-    if speed > 1.0 + 5e-4 or asks > 1.0 + 5e-3:
+    if speed > 1.0 + POSITION_SPEED_REL or asks > 1.0 + POSITION_REL:
         return None
     return _Planned(window, start, blocks, between, block, chain, plan, stepping.landed)
 
