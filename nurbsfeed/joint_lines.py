@@ -12,6 +12,20 @@ from nurbsfeed.gcode.writer import MoveWriter
 from nurbsfeed.program import PassThrough
 
 
+def write_lines(writer: MoveWriter | None, out: BinaryIO,
+                lines: tuple[PassThrough, ...]) -> None:
+    """Lines read between two curves, written where the motion is (the writer's held moves
+    first); if they carry words (a zero-length G1, an F) the next move writes its G1 and F
+    again, since the controller executed theirs."""
+    if not lines:
+        return
+    if writer is not None:
+        writer.end_curve()
+    out.write(b"".join(line.text.encode(ENCODING, ERRORS) for line in lines))
+    if writer is not None and any(line.words for line in lines):
+        writer.after_lines()
+
+
 class JointLines:
     """Hands points to the writer and, where the motion crosses a joint, writes the lines read
     there, in place (design §3b): after the last point at or before the joint. `crossings`
@@ -48,11 +62,4 @@ class JointLines:
         self.given += len(points)
 
     def _lines(self, joint: int) -> None:
-        lines = self.between[joint]
-        if not lines:
-            return
-        if self.writer is not None:
-            self.writer.end_curve()
-        self.out.write(b"".join(line.text.encode(ENCODING, ERRORS) for line in lines))
-        if self.writer is not None and any(line.words for line in lines):
-            self.writer.after_lines()
+        write_lines(self.writer, self.out, self.between[joint])

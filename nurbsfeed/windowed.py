@@ -27,7 +27,7 @@ from nurbsfeed.gcode.profile_record import record_lines
 from nurbsfeed.gcode.writer import MoveWriter, chain_comment, comment_line, rapid_line
 from nurbsfeed.interpolate.landing import Landing
 from nurbsfeed.interpolate.stepping import Stepping
-from nurbsfeed.joint_lines import JointLines
+from nurbsfeed.joint_lines import JointLines, write_lines
 from nurbsfeed.machine import Machine
 from nurbsfeed.planning.basis import AT_REST, ChainEnds
 from nurbsfeed.planning.chain import Chain, curve_after
@@ -156,6 +156,9 @@ def _next_start(planned: _Planned, method: str) -> tuple[_Start, int] | None:
     ends, seed = made
     chain = planned.chain
     piece = int(chain.piece_of(np.array([u]))[0])
+    n_written = len(planned.blocks) - len(planned.window.ahead)
+    if piece != n_written - 1:
+        return None  # the point lies before the last written curve: not tried here
     local = float(chain.piece_u(np.array([u]), np.array([piece]))[0])
     block = planned.blocks[piece]
     curve = block.curve
@@ -170,11 +173,7 @@ def _next_start(planned: _Planned, method: str) -> tuple[_Start, int] | None:
         feed_mm_s = np.concatenate([lead, feed_mm_s[keep]])
     tail = dataclasses.replace(block, curve=tail_curve, feed_u=feed_u, feed_mm_s=feed_mm_s,
                                rapid_to_start=False)
-    n_written = len(planned.blocks) - len(planned.window.ahead)
-    lines = planned.window.ahead_between[0] if piece == n_written - 1 else ()
-    if piece != n_written - 1:
-        return None  # the point lies before the last written curve: not tried here
-    return _Start(tail, lines, ends, seed), k
+    return _Start(tail, planned.window.ahead_between[0], ends, seed), k
 
 
 def _write(planned: _Planned, out: ChainOutput, index: int, upto: int | None,
@@ -287,16 +286,6 @@ def _drop(window: ChainWindow, k: int
     return None, (), k - n
 
 
-def _lines_at_rest(out: ChainOutput, lines: tuple[PassThrough, ...]) -> None:
-    if not lines:
-        return
-    if out.writer is not None:
-        out.writer.end_curve()
-    out.out.write(b"".join(line.text.encode(ENCODING, ERRORS) for line in lines))
-    if out.writer is not None and any(line.words for line in lines):
-        out.writer.after_lines()
-
-
 def convert_windows(windows, out: ChainOutput, index: int) -> int:
     """Convert the windows of one chain (each but the last with a look-ahead), in order; returns
     the index after its last curve. Where the next window cannot be planned from the hand-on
@@ -310,7 +299,7 @@ def convert_windows(windows, out: ChainOutput, index: int) -> int:
         window = given
         if skip:
             dropped, lines_now, skip = _drop(given, skip)
-            _lines_at_rest(out, lines_now)
+            write_lines(out.writer, out.out, lines_now)
             if dropped is None:
                 continue
             window = dropped
@@ -330,7 +319,7 @@ def convert_windows(windows, out: ChainOutput, index: int) -> int:
                 _write(pending, out, index, None, rest_of is not None or bool(window.ahead))
                 index += len(pending.blocks)
                 dropped, lines_now, skip = _drop(window, skip)
-                _lines_at_rest(out, lines_now)
+                write_lines(out.writer, out.out, lines_now)
                 pending = None
                 if dropped is None:
                     continue
