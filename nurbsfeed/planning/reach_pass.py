@@ -1,0 +1,292 @@
+"""The passes of the path planner over one stretch (design §2d): the backward pass that builds
+every knot's controllable set (planning.reach_sets), the forward pass that runs the fastest
+motion those sets allow, and the highest b each knot can be passed at.
+
+A stretch has Q cells between Q + 1 knots; at its start and its end it rests (after a rest cell
+b = b_end y^(4/3), constant jerk from rest: at the knot beside it a = 2 b / (3 h_rest), and b is
+at most the rest cell's own cap) or moves in a given state (b, a) (a chain's window, design
+§3b). Arrays per cell (Q,): h, the geometry at its start, middle and end (Q, G_SIZE), the
+linearisation points at its middle; per knot (Q + 1,): the linearisation points and floors.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from nurbsfeed.jit import jit
+from nurbsfeed.planning.reach_rows import ROWS_PER_CELL, cell_rows
+from nurbsfeed.planning.reach_sets import (
+    FINE_PROBES,
+    FOCUS_PROBES,
+    FOCUS_REL,
+    MAX_LEVELS,
+    WIDE_PROBES,
+    _sublevel,
+    _superlevel,
+    chain_of,
+    fold_end,
+    levels,
+    probes_around,
+    split_rows,
+)
+
+END_REST, END_MOVING = 0, 1
+FORWARD_TOL_REL = 1e-9  # a row the forward pass's state breaks by less than this share holds
+U_TOL_REL = 1e-7  # an empty range of u narrower than this share of its size is rounding
+
+
+@jit
+def controllable(h, g0, gm, g1, b_knot, b_mid, floors, lim, end_kind, end_p1, end_p2, focus,
+                 focused, lower, top, lev_a, lev_hi, lev_lo, lev_n):
+    """The backward pass: every knot's levels (Q + 1, MAX_LEVELS) and their count (Q + 1,)
+    (the last knot's are not needed: the end is folded into the last cell), from knot top
+    down (the knots after it keep the levels they have). focused: probe each knot's set
+    closely around the acceleration focus (Q + 1,) of a motion already found instead. lower:
+    find each set's lower boundary too (else the rows' own bound on b stands for it: the
+    forward pass rides the upper one). Returns the knot whose set came out empty, -1 when
+    none did."""
+    q_n = h.size
+    rows = np.empty((ROWS_PER_CELL, 4))
+    folded = np.empty((ROWS_PER_CELL + 2, 4))
+    cha = np.empty(MAX_LEVELS)
+    chg = np.empty(MAX_LEVELS)
+    chl = np.empty(MAX_LEVELS)
+    probe_hi = np.empty(MAX_LEVELS * FINE_PROBES)
+    probe_lo = np.empty(MAX_LEVELS * FINE_PROBES)
+    probes = np.empty(WIDE_PROBES + FOCUS_PROBES)
+    up = np.empty((ROWS_PER_CELL + 2, 3))
+    down = np.empty((ROWS_PER_CELL + 2, 3))
+    fixed = np.empty((ROWS_PER_CELL + 2, 3))
+    work = np.empty((4, ROWS_PER_CELL + 2))
+    acc = lim[0]
+    lev_n[q_n] = 0
+    for j in range(top, -1, -1):
+        n = cell_rows(g0[j], gm[j], g1[j], h[j], b_knot[j], b_mid[j], b_knot[j + 1], floors[j],
+                      floors[j + 1], lim, rows)
+        p_n = probes_around(acc, WIDE_PROBES, FOCUS_PROBES if focused else 0, focus[j],
+                            FOCUS_REL * acc, probes)
+        if j == q_n - 1:
+            n = fold_end(rows, n, h[j], end_kind, end_p1, end_p2, folded)
+            nu, nd, nf = split_rows(folded, n, h[j], up, down, fixed)
+            m = levels((up, down, fixed, nu, nd, nf), h[j], cha, chg, chl, 0, 0, 0,
+                       probes[:p_n], acc, lev_a[j], lev_hi[j], lev_lo[j], probe_hi, probe_lo,
+                       work, lower)
+        else:
+            nu, nd, nf = split_rows(rows, n, h[j], up, down, fixed)
+            nc, peak, valley = chain_of(lev_a[j + 1], lev_hi[j + 1], lev_lo[j + 1],
+                                        lev_n[j + 1], h[j], cha, chg, chl)
+            m = levels((up, down, fixed, nu, nd, nf), h[j], cha, chg, chl, nc, peak, valley,
+                       probes[:p_n], acc, lev_a[j], lev_hi[j], lev_lo[j], probe_hi, probe_lo,
+                       work, lower)
+        lev_n[j] = m
+        if m == 0:
+            return j
+    return -1
+
+
+@jit
+def _at(lev_a, lev_hi, lev_lo, n, a):
+    """The set's boundaries (low, high) at acceleration a, linear between its levels; (1, -1)
+    outside its range."""
+    if n == 0 or a < lev_a[0] or a > lev_a[n - 1]:
+        return 1.0, -1.0
+    k = 0
+    while k < n - 2 and lev_a[k + 1] < a:
+        k += 1
+    if n == 1:
+        return lev_lo[0], lev_hi[0]
+    w = (a - lev_a[k]) / (lev_a[k + 1] - lev_a[k]) if lev_a[k + 1] > lev_a[k] else 0.0
+    w = min(max(w, 0.0), 1.0)
+    return ((1.0 - w) * lev_lo[k] + w * lev_lo[k + 1],
+            (1.0 - w) * lev_hi[k] + w * lev_hi[k + 1])
+
+
+@jit
+def _last_root(lev_a, values, n):
+    """The greatest a at which the piecewise linear (lev_a, values) (n points, concave) is
+    still >= 0; -inf where it is negative everywhere."""
+    if values[n - 1] >= 0.0:
+        return lev_a[n - 1]
+    for k in range(n - 2, -1, -1):
+        if values[k] >= 0.0:
+            return lev_a[k] + (lev_a[k + 1] - lev_a[k]) * values[k] / (values[k] - values[k + 1])
+    return -np.inf
+
+
+@jit
+def _ray_start(lev_a, lev_hi, lev_lo, n, slope, a_cap):
+    """The greatest state (b, a = slope b) on a rest cell's ray inside a set, with a <= a_cap
+    (the rest cell's own cap on b, as an acceleration); b <= 0 where the ray misses the set.
+    hi(a) - a / slope and a / slope - lo(a) are concave in a: the ray runs inside the set up
+    to the last root of either."""
+    if n == 0:
+        return -1.0
+    above = np.empty(n)
+    below = np.empty(n)
+    for k in range(n):
+        above[k] = lev_hi[k] - lev_a[k] / slope
+        below[k] = lev_a[k] / slope - lev_lo[k]
+    a = min(_last_root(lev_a, above, n), _last_root(lev_a, below, n), a_cap)
+    if not a >= max(lev_a[0], 0.0):
+        return -1.0
+    low, high = _at(lev_a, lev_hi, lev_lo, n, a)
+    b = a / slope
+    if not low - 1e-9 * abs(low) <= b <= high + 1e-9 * abs(high):
+        return -1.0
+    return b
+
+
+@jit
+def _u_range(rows, n, b, a):
+    """The u that keep every row at start state (b, a): (low, high); low > high where a row
+    without u breaks, or the rows leave none."""
+    low = -np.inf
+    high = np.inf
+    for r in range(n):
+        rest = rows[r, 3] - rows[r, 0] * b - rows[r, 1] * a
+        tol = FORWARD_TOL_REL * (abs(rows[r, 3]) + abs(rows[r, 0] * b) + abs(rows[r, 1] * a))
+        cu = rows[r, 2]
+        if cu > 0.0:
+            high = min(high, (rest + tol) / cu)
+        elif cu < 0.0:
+            low = max(low, (rest + tol) / cu)
+        elif rest < -tol:
+            return 1.0, -1.0
+    return low, high
+
+
+@jit
+def forward(h, g0, gm, g1, b_knot, b_mid, floors, lim, start_kind, start_p1, start_p2,
+            end_kind, end_p1, end_p2, lev_a, lev_hi, lev_lo, lev_n, b_out, a_out):
+    """The fastest motion the sets allow: from the start, at every knot the greatest u that
+    keeps the cell's rows and lands in the next knot's set (it takes b and a up together).
+    start_kind END_REST: after a rest cell start_p1 long with far value at most start_p2;
+    END_MOVING: in state (start_p1, start_p2). b_out, a_out (Q + 1,). Returns -1, or the knot
+    the pass found no way on from."""
+    q_n = h.size
+    rows = np.empty((ROWS_PER_CELL, 4))
+    cha = np.empty(MAX_LEVELS)
+    chg = np.empty(MAX_LEVELS)
+    chl = np.empty(MAX_LEVELS)
+    if start_kind == END_REST:
+        slope = 2.0 / (3.0 * start_p1)
+        b = _ray_start(lev_a[0], lev_hi[0], lev_lo[0], lev_n[0], slope, start_p2 * slope)
+        if not b > 0.0:
+            return 0
+        a = slope * b
+    else:
+        b, a = start_p1, start_p2
+        low, high = _at(lev_a[0], lev_hi[0], lev_lo[0], lev_n[0], a)
+        if not low - 1e-6 * abs(low) <= b <= high + 1e-6 * abs(high):
+            return 0
+    b_out[0] = b
+    a_out[0] = a
+    for j in range(q_n):
+        hj = h[j]
+        n = cell_rows(g0[j], gm[j], g1[j], hj, b_knot[j], b_mid[j], b_knot[j + 1], floors[j],
+                      floors[j + 1], lim, rows)
+        low, high = _u_range(rows, n, b, a)
+        if j == q_n - 1:
+            if end_kind == END_REST:
+                u = -(b + (2.0 * hj + 1.5 * end_p1) * a) / (hj * hj + 1.5 * end_p1 * hj)
+            else:
+                u = (end_p2 - a) / hj
+            tol = U_TOL_REL * (abs(low) + abs(high) + abs(u) + 1.0)
+            if not low - tol <= u <= high + tol:
+                return j
+        else:
+            nc, peak, valley = chain_of(lev_a[j + 1], lev_hi[j + 1], lev_lo[j + 1],
+                                        lev_n[j + 1], hj, cha, chg, chl)
+            c = min(b + hj * a, chg[peak])
+            lo1, hi1, _, _ = _superlevel(cha, chg, nc, peak, c)
+            lo2, hi2, _, _ = _sublevel(cha, chl, nc, valley, max(c, chl[valley]))
+            low = max(low, (max(lo1, lo2) - a) / hj)
+            high = min(high, (min(hi1, hi2) - a) / hj)
+            tol = U_TOL_REL * (abs(low) + abs(high) + 1.0)
+            if low > high + tol:
+                return j
+            u = high if high >= low else 0.5 * (low + high)
+        b += hj * (2.0 * a + hj * u)
+        a += hj * u
+        b_out[j + 1] = max(b, 0.0)
+        a_out[j + 1] = a
+        b = b_out[j + 1]
+    return -1
+
+
+@jit
+def highest(ka, khi, klo, kn, ra, rhi, rlo, rn, out):
+    """Per knot (Q + 1,): the greatest b of a state both controllable (levels ka, khi, klo, kn,
+    (Q + 1, L)) and reachable from the start (levels of the reversed stretch, ra ..., at knot
+    Q - j with a's sign turned), into out; 0 where the two do not meet. Both boundaries are
+    linear between levels: the highest point of the lower of the two upper ones lies at a
+    level of either (walked in ascending order, the reversed ones from their end) or where
+    they cross between two such."""
+    q1 = khi.shape[0]
+    for j in range(q1):
+        jr = q1 - 1 - j
+        nk, nr = kn[j], rn[jr]
+        best = 0.0
+        if nk > 0 and nr > 0:
+            lo_a = max(ka[j, 0], -ra[jr, nr - 1])
+            hi_a = min(ka[j, nk - 1], -ra[jr, 0])
+            i = 0
+            k = nr - 1
+            x = lo_a
+            d_last = np.nan
+            x_last = lo_a
+            while lo_a <= hi_a:
+                l1, h1 = _at(ka[j], khi[j], klo[j], nk, x)
+                l2, h2 = _at(ra[jr], rhi[jr], rlo[jr], nr, -x)
+                if max(l1, l2) <= min(h1, h2):
+                    best = max(best, min(h1, h2))
+                d = h1 - h2
+                if d_last * d < 0.0:  # the two upper boundaries cross in between
+                    xc = x_last + (x - x_last) * d_last / (d_last - d)
+                    m1, c1 = _at(ka[j], khi[j], klo[j], nk, xc)
+                    m2, c2 = _at(ra[jr], rhi[jr], rlo[jr], nr, -xc)
+                    if max(m1, m2) <= min(c1, c2):
+                        best = max(best, min(c1, c2))
+                d_last, x_last = d, x
+                while i < nk and ka[j, i] <= x:
+                    i += 1
+                while k >= 0 and -ra[jr, k] <= x:
+                    k -= 1
+                nxt = hi_a
+                if i < nk:
+                    nxt = min(nxt, ka[j, i])
+                if k >= 0:
+                    nxt = min(nxt, -ra[jr, k])
+                if nxt <= x:
+                    break
+                x = nxt
+        out[j] = best
+
+
+@jit
+def motion_time(h, b, a, start_h, end_h):
+    """The time of a stretch's motion (b, a) (Q + 1,) at its knots: each cell's b = b + 2 a x +
+    u x^2 by 8-point Gauss-Legendre on 1 / sqrt(b), and each rest cell's 3 h / sqrt(b) (0 h:
+    a moving end, none)."""
+    gx = (-0.9602898564975363, -0.7966664774136267, -0.5255324099163290, -0.1834346424956498,
+          0.1834346424956498, 0.5255324099163290, 0.7966664774136267, 0.9602898564975363)
+    gw = (0.1012285362903763, 0.2223810344533745, 0.3137066458778873, 0.3626837833783620,
+          0.3626837833783620, 0.3137066458778873, 0.2223810344533745, 0.1012285362903763)
+    q_n = h.size
+    total = 0.0
+    if start_h > 0.0:
+        total += 3.0 * start_h / math.sqrt(max(b[0], 1e-300))
+    if end_h > 0.0:
+        total += 3.0 * end_h / math.sqrt(max(b[q_n], 1e-300))
+    for j in range(q_n):
+        hj = h[j]
+        u = (a[j + 1] - a[j]) / hj
+        t = 0.0
+        for g in range(8):
+            x = 0.5 * hj * (gx[g] + 1.0)
+            bx = b[j] + x * (2.0 * a[j] + u * x)
+            t += gw[g] / math.sqrt(max(bx, 1e-300))
+        total += 0.5 * hj * t
+    return total

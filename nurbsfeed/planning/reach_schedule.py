@@ -1,0 +1,309 @@
+"""The path planner's schedule on a layout (design §2d): per stretch, the controllable sets and
+the fastest motion inside them, with floors where that motion dips (planning.reach_pass).
+
+1. Backward pass: every knot's controllable set, linearised at the speed estimate (or at the
+   schedule the layout was cut from); forward pass: the fastest motion inside them.
+2. The same backward pass over the stretch reversed: the states reachable from its start. The
+   highest b both reachable and controllable at a knot bounds every motion's b there.
+3. Where the forward motion runs below FLOOR_SHARE of that bound (it braked as late as its
+   sets allowed and then could not take its deceleration back before it came to the slow
+   part, dipping far below what passing there needs), a floor at FLOOR_KEEP of the bound
+   makes the sets brake earlier; both passes run again, linearised at the motion (and the
+   floors), and give the schedule. Where the floors leave no motion the last one stands.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from nurbsfeed.planning.basis import BETWEEN, POINTS
+from nurbsfeed.planning.cells import Layout
+from nurbsfeed.planning.limits import Limits
+from nurbsfeed.planning.reach_pass import (
+    END_MOVING,
+    END_REST,
+    controllable,
+    forward,
+    highest,
+    motion_time,
+)
+from nurbsfeed.planning.reach_rows import B_FLOOR, limits_vector
+from nurbsfeed.planning.reach_sets import MAX_LEVELS
+from nurbsfeed.planning.rows import cell_ratios
+from nurbsfeed.planning.schedule import BETWEEN_REL, Schedule, cell_times, static_b
+
+STATIC_REACH = 2.0
+COARSE = 1
+LOWER = True
+FLOOR_SHARE = 0.9
+FLOOR_KEEP = 0.95
+# floors that leave a knot's set empty are lowered by this factor, this many times at most
+FLOOR_RELAX = 0.9
+FLOOR_RELAXATIONS = 4
+
+
+def _reversed_geometry(g: np.ndarray) -> np.ndarray:
+    """Geometry rows read the other way along the path: T, K_s and the jump turn sign."""
+    out = g[::-1].copy()
+    out[:, 1:4] *= -1.0
+    out[:, 7:13] *= -1.0
+    return out
+
+
+class _Stretch:
+    """One stretch's arrays for the passes (module docstring of planning.reach_pass)."""
+
+    def __init__(self, layout: Layout, s: int, q0: int, lin: np.ndarray) -> None:
+        first, last = int(layout.first[s]), int(layout.last[s])
+        self.first, self.last = first, last
+        q_n = last - first - 1
+        self.q0, self.q_n = q0, q_n
+        cells = layout.cells[q0:q0 + q_n]
+        self.h = np.ascontiguousarray(cells[:, 4])
+        geo = layout.geo[q0:q0 + q_n]
+        self.g0 = np.ascontiguousarray(geo[:, 0])
+        self.gm = np.ascontiguousarray(geo[:, 1])
+        self.g1 = np.ascontiguousarray(geo[:, 2])
+        kw = layout.knot_w[first:first + q_n + 1]
+        c = lin[first:last + 1]
+        self.lin_knot = np.maximum(kw * c[:-1] + (1.0 - kw) * c[1:], B_FLOOR)
+        # b at each cell's middle (basis.point_weights at 0.5, for all cells at once)
+        g0, g1, w0, hh = cells[:, 1], cells[:, 2], cells[:, 3], cells[:, 4]
+        s0 = (c[1:-1] - c[:-2]) / g0
+        s1 = (c[2:] - c[1:-1]) / g1
+        xs = 0.5 * hh
+        mid = w0 * c[:-2] + (1.0 - w0) * c[1:-1] + s0 * xs + 0.5 * (s1 - s0) / hh * xs * xs
+        self.lin_mid = np.maximum(mid, B_FLOOR)
+        self.start = (END_REST, float(layout.rest_h[s, 0]), float(layout.cap[first]))
+        if layout.is_open(s, 0):
+            b, c1 = layout.fixed[0]
+            self.start = (END_MOVING, float(b), float((c1 - b) / self.h[0]))
+        self.end = (END_REST, float(layout.rest_h[s, 1]), float(layout.cap[last]))
+        if layout.is_open(s, 1):
+            c0, b = layout.fixed[1]
+            self.end = (END_MOVING, float(b), float((b - c0) / self.h[-1]))
+
+    def levels(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        n = self.q_n + 1
+        return (np.zeros((n, MAX_LEVELS)), np.zeros((n, MAX_LEVELS)), np.zeros((n, MAX_LEVELS)),
+                np.zeros(n, dtype=np.int64))
+
+    def plan(self, lim: np.ndarray, floors: np.ndarray, lin_knot: np.ndarray,
+             lin_mid: np.ndarray, focus: np.ndarray | None = None
+             ) -> tuple[np.ndarray, np.ndarray, tuple] | None:
+        """Backward and forward pass: the motion (b, a) at the knots and the sets; None where
+        a set came out empty or the forward pass found no way on. focus: the acceleration
+        (Q + 1,) of a motion found before, where the sets are probed closely."""
+        sets = self.levels()
+        focused = focus is not None
+        floors = floors.copy()
+        top = self.q_n - 1
+        asked = floors.copy()
+        while True:
+            empty = controllable(self.h, self.g0, self.gm, self.g1, lin_knot, lin_mid, floors,
+                                 lim, *self.end, focus if focused else lin_knot, focused,
+                                 LOWER, top, *sets)
+            if empty < 0:
+                break
+            # the first run of floors from the empty knot on asks more than the sets allow:
+            # lowered (at last dropped), and the pass resumed where the run ends
+            start = empty
+            while start <= self.q_n and floors[start] == 0.0:
+                start += 1
+            if start > self.q_n:
+                return None
+            run = start
+            while run + 1 <= self.q_n and floors[run + 1] > 0.0:
+                run += 1
+            lowest = asked[start] * FLOOR_RELAX ** FLOOR_RELAXATIONS
+            floors[start:run + 1] *= FLOOR_RELAX if floors[start] > lowest else 0.0
+            top = min(run, self.q_n - 1)
+        b = np.empty(self.q_n + 1)
+        a = np.empty(self.q_n + 1)
+        if forward(self.h, self.g0, self.gm, self.g1, lin_knot, lin_mid, floors, lim,
+                   *self.start, *self.end, *sets, b, a) >= 0:
+            return None
+        return b, a, sets
+
+    def reachable(self, lim: np.ndarray, lin_knot: np.ndarray, lin_mid: np.ndarray
+                  ) -> tuple | None:
+        """The sets of the stretch run backwards: the states reachable from its start."""
+        sets = self.levels()
+        end = self.start if self.start[0] == END_REST else (END_MOVING, self.start[1],
+                                                             -self.start[2])
+        if controllable(np.ascontiguousarray(self.h[::-1]), _reversed_geometry(self.g1),
+                        _reversed_geometry(self.gm), _reversed_geometry(self.g0),
+                        np.ascontiguousarray(lin_knot[::-1]),
+                        np.ascontiguousarray(lin_mid[::-1]), np.zeros(self.q_n + 1), lim,
+                        *end, lin_knot, False, LOWER, self.q_n - 1, *sets) >= 0:
+            return None
+        return sets
+
+    def time(self, b: np.ndarray, a: np.ndarray) -> float:
+        start_h = self.start[1] if self.start[0] == END_REST else 0.0
+        end_h = self.end[1] if self.end[0] == END_REST else 0.0
+        return float(motion_time(self.h, b, a, start_h, end_h))
+
+    def coefficients(self, b: np.ndarray, a: np.ndarray, c: np.ndarray) -> None:
+        """The motion as the stretch's spline coefficients: b at its first and last knot, and
+        each cell's middle coefficient b_j + h_j a_j (its quadratic's control point)."""
+        c[self.first] = b[0]
+        c[self.first + 1:self.last] = b[:-1] + self.h * a[:-1]
+        c[self.last] = b[-1]
+
+
+def _mid_values(h: np.ndarray, b: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """b at each cell's middle of the motion (b, a) at the knots."""
+    u = np.diff(a) / h
+    return b[:-1] + h * a[:-1] + 0.25 * h * h * u
+
+
+def _coarse(st: _Stretch, step: int) -> tuple[_Stretch, np.ndarray]:
+    """The stretch on every step-th knot (its cells merged), and the fine knots' arc lengths
+    from the start (Q + 1,) with the coarse knots' positions among them."""
+    q_n = st.q_n
+    starts = np.arange(0, q_n, step)
+    ends = np.minimum(starts + step, q_n)
+    co = object.__new__(_Stretch)
+    co.first, co.last, co.q0 = st.first, st.last, st.q0
+    co.q_n = starts.size
+    s = np.concatenate(([0.0], np.cumsum(st.h)))
+    co.h = s[ends] - s[starts]
+    co.g0 = np.ascontiguousarray(st.g0[starts])
+    co.g1 = np.ascontiguousarray(st.g1[ends - 1])
+    m = ends - starts
+    mid_cell = starts + (m - 1) // 2
+    even = m % 2 == 0
+    co.gm = np.ascontiguousarray(np.where(even[:, None], st.g1[mid_cell], st.gm[mid_cell]))
+    knots = np.append(starts, q_n)
+    co.lin_knot = np.ascontiguousarray(st.lin_knot[knots])
+    co.lin_mid = np.ascontiguousarray(np.where(even, st.lin_knot[mid_cell + 1],
+                                               st.lin_mid[mid_cell]))
+    co.start, co.end = st.start, st.end
+    return co, s
+
+
+def _plan_stretch(st: _Stretch, lim: np.ndarray) -> tuple[np.ndarray, np.ndarray, int] | None:
+    """The motion of one stretch (module docstring): (b, a) at its knots and the passes run."""
+    no_floor = np.zeros(st.q_n + 1)
+    co, s = _coarse(st, COARSE) if COARSE > 1 else (st, None)
+    first = co.plan(lim, np.zeros(co.q_n + 1), co.lin_knot, co.lin_mid)
+    if first is None:
+        return None
+    b1, a1, k_sets = first
+    passes = 2
+    bound = None
+    r_sets = co.reachable(lim, co.lin_knot, co.lin_mid)
+    if r_sets is not None:
+        passes += 1
+        bound = np.empty(co.q_n + 1)
+        highest(*k_sets, *r_sets, bound)
+    if s is not None:
+        # the coarse motion at the fine knots (each coarse cell's quadratic), the bound
+        # between the coarse knots linearly
+        sk = s[np.append(np.arange(0, st.q_n, COARSE), st.q_n)]
+        cell = np.clip(np.searchsorted(sk, s, side="right") - 1, 0, co.q_n - 1)
+        x = s - sk[cell]
+        u = np.diff(a1) / co.h
+        b1, a1 = b1[cell] + x * (2.0 * a1[cell] + u[cell] * x), a1[cell] + u[cell] * x
+        if bound is not None:
+            bound = np.interp(s, sk, bound)
+    floors = no_floor
+    if bound is not None:
+        floors = np.where(b1 < FLOOR_SHARE * bound, FLOOR_KEEP * bound, 0.0)
+        floors[0] = floors[-1] = 0.0
+    lin_knot = np.maximum(np.maximum(b1, floors), B_FLOOR)
+    lin_mid = np.maximum(np.maximum(_mid_values(st.h, b1, a1),
+                                    0.5 * (floors[1:] + floors[:-1])), B_FLOOR)
+    best = None
+    if s is None:
+        best = (b1, a1, st.time(b1, a1))
+    for f in ((floors, no_floor) if floors.any() else (no_floor,)):
+        passes += 2
+        again = st.plan(lim, f, lin_knot, lin_mid, a1)
+        if again is None:
+            continue
+        t = st.time(again[0], again[1])
+        if best is None or t < best[2]:
+            best = (again[0], again[1], t)
+        break
+    if best is None:
+        return None
+    return best[0], best[1], passes
+
+
+def _estimate(layout: Layout, lim: Limits) -> np.ndarray:
+    """The first linearisation point (C,): the speed estimate (no motion is faster), but at most
+    STATIC_REACH times each point's static limit (b' = b'' = 0: a curvature peak, where the
+    jerk-limited motion runs far below the estimate and a tangent taken there would cut the
+    jerk it may use to a fraction)."""
+    acc_x = np.array(lim.axis_acc_mm_s2, dtype=float)
+    jerk_x = np.array(lim.axis_jerk_mm_s3, dtype=float)
+    sb = np.empty((layout.cells.shape[0], 3))
+    static_b(layout.geo, lim.jerk_mm_s3, lim.normal_jerk_mm_s3, acc_x, jerk_x, lim.period_s, sb)
+    static = np.full(layout.n_coefficients, np.inf)
+    i0 = layout.cells[:, 0].astype(np.int64)
+    for j in range(3):
+        np.minimum.at(static, i0 + j, sb.min(axis=1))
+    return np.minimum(np.minimum(layout.b_estimate, layout.cap), STATIC_REACH * static)
+
+
+def reach_schedule(layout: Layout, lim: Limits, start: np.ndarray | None = None,
+                   seed: tuple[np.ndarray, np.ndarray] | None = None,
+                   slack: tuple[float, float] = (0.0, 0.0)) -> Schedule:
+    """The schedule on `layout` under `lim` (module docstring): linearised first at start
+    (coefficients (C,); by default the speed estimate, and where a seed (xi (K,), c (K,))
+    covers the coefficients, its). slack (share, mm): every limit within that distance of a
+    moving start loosened by that share, for a start in a state the limits there leave no
+    way on from (planning.path_plan)."""
+    lin = _estimate(layout, lim) if start is None else np.array(start)
+    if seed is not None:
+        span = 1e-9 * max(float(layout.xi[-1]), 1.0)
+        inside = (layout.xi >= seed[0][0] - span) & (layout.xi <= seed[0][-1] + span)
+        lin[inside] = np.interp(layout.xi[inside], *seed)
+    limits = limits_vector(lim)
+    if slack[0] > 0.0:
+        limits[:3] *= 1.0 + slack[0]
+        limits[4:] *= 1.0 + slack[0]
+    c = np.minimum(lin, layout.cap).astype(float)
+    solved = True
+    passes = 0
+    q0 = 0
+    for s in range(layout.first.size):
+        st = _Stretch(layout, s, q0, lin)
+        q0 += st.q_n
+        made = _plan_stretch(st, limits)
+        if made is None:
+            solved = False
+            continue
+        st.coefficients(made[0], made[1], c)
+        passes += made[2]
+    c[layout.fixed_index] = layout.fixed_values
+    return _schedule(layout, lim, c, passes, solved)
+
+
+def _schedule(layout: Layout, lim: Limits, c: np.ndarray, passes: int, solved: bool
+              ) -> Schedule:
+    """The coefficients c as a Schedule: their cycle, the slowdown their exact check at every
+    cell's points asks, the cells they break a limit in between those points."""
+    acc_x = np.array(lim.axis_acc_mm_s2, dtype=float)
+    vel_x = np.array(lim.axis_vel_mm_s, dtype=float)
+    jerk_x = np.array(lim.axis_jerk_mm_s3, dtype=float)
+    q_n = layout.cells.shape[0]
+    times = np.empty(q_n + 2 * layout.first.size)
+    cycle = cell_times(c, layout.cells, layout.first, layout.last, layout.rest_h, times)
+    ratios = np.empty(q_n)
+    cell_ratios(c, layout.cells, layout.geo, np.array(POINTS), lim.jerk_mm_s3, lim.acc_mm_s2,
+                lim.normal_jerk_mm_s3, acc_x, vel_x, jerk_x, lim.period_s, ratios)
+    between = np.empty(q_n)
+    cell_ratios(c, layout.cells, layout.between, np.array(BETWEEN), lim.jerk_mm_s3,
+                lim.acc_mm_s2, lim.normal_jerk_mm_s3, acc_x, vel_x, jerk_x, lim.period_s,
+                between)
+    slowdown = max(1.0, float(ratios.max(initial=0.0)))
+    if not math.isfinite(cycle):
+        solved = False
+    c.setflags(write=False)
+    return Schedule(layout, c, float(cycle), slowdown, passes, solved,
+                    between > 1.0 + BETWEEN_REL)
