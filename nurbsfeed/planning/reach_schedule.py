@@ -35,13 +35,20 @@ from nurbsfeed.planning.rows import cell_ratios
 from nurbsfeed.planning.schedule import BETWEEN_REL, Schedule, cell_times, static_b
 
 STATIC_REACH = 2.0
+REST_REACH = 1.5
 COARSE = 1
+EXTRA_ROUNDS = 0
 LOWER = True
 FLOOR_SHARE = 0.9
 FLOOR_KEEP = 0.95
 # floors that leave a knot's set empty are lowered by this factor, this many times at most
 FLOOR_RELAX = 0.9
 FLOOR_RELAXATIONS = 4
+# an empty set without floors to blame: the linearisation this many knots around it (a quarter
+# of them upstream) lowered by LIN_LOWER, LIN_RETRIES times at most
+LIN_WINDOW = 24
+LIN_LOWER = 0.25
+LIN_RETRIES = 3
 
 
 def _reversed_geometry(g: np.ndarray) -> np.ndarray:
@@ -50,6 +57,58 @@ def _reversed_geometry(g: np.ndarray) -> np.ndarray:
     out[:, 1:4] *= -1.0
     out[:, 7:13] *= -1.0
     return out
+
+
+def _levels(q_n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Room for a stretch's sets: per knot (Q + 1,) the levels' accelerations, upper and lower
+    boundaries (Q + 1, MAX_LEVELS) and their count."""
+    n = q_n + 1
+    return (np.zeros((n, MAX_LEVELS)), np.zeros((n, MAX_LEVELS)), np.zeros((n, MAX_LEVELS)),
+            np.zeros(n, dtype=np.int64))
+
+
+def _backward(geometry: tuple, lim: np.ndarray, floors: np.ndarray, lin_knot: np.ndarray,
+              lin_mid: np.ndarray, focus: np.ndarray | None, end: tuple
+              ) -> tuple[tuple, np.ndarray, np.ndarray, np.ndarray] | None:
+    """The backward pass over a stretch (geometry = h, g0, gm, g1), with what it had to give
+    up on its way: where a knot's set comes out empty, the first run of floors from there on
+    asks more than the sets allow and is lowered (at last dropped); where there is none, the
+    sets went too thin at low speed, where the rows' tangents to J / sqrt(b), taken far above
+    the speed the motion has there, leave it too little jerk: the linearisation is lowered
+    around the knot (up to LIN_RETRIES times). The pass resumes downstream of the change.
+    Returns (sets, floors, lin_knot, lin_mid) as they stood when it got through, or None."""
+    q_n = geometry[0].size
+    sets = _levels(q_n)
+    focused = focus is not None
+    floors = floors.copy()
+    asked = floors.copy()
+    lowered = 0
+    top = q_n - 1
+    while True:
+        empty = controllable(*geometry, lin_knot, lin_mid, floors, lim, *end,
+                             focus if focused else lin_knot, focused, LOWER, top, *sets)
+        if empty < 0:
+            return sets, floors, lin_knot, lin_mid
+        start = empty
+        while start <= q_n and floors[start] == 0.0:
+            start += 1
+        if start <= q_n:
+            run = start
+            while run + 1 <= q_n and floors[run + 1] > 0.0:
+                run += 1
+            lowest = asked[start] * FLOOR_RELAX ** FLOOR_RELAXATIONS
+            floors[start:run + 1] *= FLOOR_RELAX if floors[start] > lowest else 0.0
+            top = min(run, q_n - 1)
+            continue
+        if lowered == LIN_RETRIES:
+            return None
+        lowered += 1
+        lo, hi = max(empty - LIN_WINDOW // 4, 0), min(empty + LIN_WINDOW, q_n)
+        lin_knot = lin_knot.copy()
+        lin_mid = lin_mid.copy()
+        lin_knot[lo:hi + 1] = np.maximum(lin_knot[lo:hi + 1] * LIN_LOWER, B_FLOOR)
+        lin_mid[lo:hi] = np.maximum(lin_mid[lo:hi] * LIN_LOWER, B_FLOOR)
+        top = min(hi, q_n - 1)
 
 
 class _Stretch:
@@ -86,9 +145,7 @@ class _Stretch:
             self.end = (END_MOVING, float(b), float((b - c0) / self.h[-1]))
 
     def levels(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        n = self.q_n + 1
-        return (np.zeros((n, MAX_LEVELS)), np.zeros((n, MAX_LEVELS)), np.zeros((n, MAX_LEVELS)),
-                np.zeros(n, dtype=np.int64))
+        return _levels(self.q_n)
 
     def plan(self, lim: np.ndarray, floors: np.ndarray, lin_knot: np.ndarray,
              lin_mid: np.ndarray, focus: np.ndarray | None = None
@@ -96,50 +153,29 @@ class _Stretch:
         """Backward and forward pass: the motion (b, a) at the knots and the sets; None where
         a set came out empty or the forward pass found no way on. focus: the acceleration
         (Q + 1,) of a motion found before, where the sets are probed closely."""
-        sets = self.levels()
-        focused = focus is not None
-        floors = floors.copy()
-        top = self.q_n - 1
-        asked = floors.copy()
-        while True:
-            empty = controllable(self.h, self.g0, self.gm, self.g1, lin_knot, lin_mid, floors,
-                                 lim, *self.end, focus if focused else lin_knot, focused,
-                                 LOWER, top, *sets)
-            if empty < 0:
-                break
-            # the first run of floors from the empty knot on asks more than the sets allow:
-            # lowered (at last dropped), and the pass resumed where the run ends
-            start = empty
-            while start <= self.q_n and floors[start] == 0.0:
-                start += 1
-            if start > self.q_n:
-                return None
-            run = start
-            while run + 1 <= self.q_n and floors[run + 1] > 0.0:
-                run += 1
-            lowest = asked[start] * FLOOR_RELAX ** FLOOR_RELAXATIONS
-            floors[start:run + 1] *= FLOOR_RELAX if floors[start] > lowest else 0.0
-            top = min(run, self.q_n - 1)
+        geometry = (self.h, self.g0, self.gm, self.g1)
+        made = _backward(geometry, lim, floors, lin_knot, lin_mid, focus, self.end)
+        if made is None:
+            return None
+        sets, floors, lin_knot, lin_mid = made
         b = np.empty(self.q_n + 1)
         a = np.empty(self.q_n + 1)
-        if forward(self.h, self.g0, self.gm, self.g1, lin_knot, lin_mid, floors, lim,
-                   *self.start, *self.end, *sets, b, a) >= 0:
+        if forward(*geometry, lin_knot, lin_mid, floors, lim, *self.start, *self.end, *sets,
+                   b, a) >= 0:
             return None
         return b, a, sets
 
     def reachable(self, lim: np.ndarray, lin_knot: np.ndarray, lin_mid: np.ndarray
                   ) -> tuple | None:
         """The sets of the stretch run backwards: the states reachable from its start."""
-        sets = self.levels()
         end = self.start if self.start[0] == END_REST else (END_MOVING, self.start[1],
                                                              -self.start[2])
-        if controllable(np.ascontiguousarray(self.h[::-1]), _reversed_geometry(self.g1),
-                        _reversed_geometry(self.gm), _reversed_geometry(self.g0),
-                        np.ascontiguousarray(lin_knot[::-1]),
-                        np.ascontiguousarray(lin_mid[::-1]), np.zeros(self.q_n + 1), lim,
-                        *end, lin_knot, False, LOWER, self.q_n - 1, *sets) >= 0:
-            return None
-        return sets
+        geometry = (np.ascontiguousarray(self.h[::-1]), _reversed_geometry(self.g1),
+                    _reversed_geometry(self.gm), _reversed_geometry(self.g0))
+        made = _backward(geometry, lim, np.zeros(self.q_n + 1),
+                         np.ascontiguousarray(lin_knot[::-1]),
+                         np.ascontiguousarray(lin_mid[::-1]), None, end)
+        return None if made is None else made[0]
 
     def time(self, b: np.ndarray, a: np.ndarray) -> float:
         start_h = self.start[1] if self.start[0] == END_REST else 0.0
@@ -231,6 +267,16 @@ def _plan_stretch(st: _Stretch, lim: np.ndarray) -> tuple[np.ndarray, np.ndarray
         break
     if best is None:
         return None
+    for _ in range(EXTRA_ROUNDS):
+        b2, a2 = best[0], best[1]
+        passes += 2
+        again = st.plan(lim, floors, np.maximum(b2, B_FLOOR),
+                        np.maximum(_mid_values(st.h, b2, a2), B_FLOOR), a2)
+        if again is None:
+            break
+        t = st.time(again[0], again[1])
+        if t < best[2]:
+            best = (again[0], again[1], t)
     return best[0], best[1], passes
 
 
@@ -247,7 +293,13 @@ def _estimate(layout: Layout, lim: Limits) -> np.ndarray:
     i0 = layout.cells[:, 0].astype(np.int64)
     for j in range(3):
         np.minimum.at(static, i0 + j, sb.min(axis=1))
-    return np.minimum(np.minimum(layout.b_estimate, layout.cap), STATIC_REACH * static)
+    # beside a rest the motion leaves (reaches) it with the jerk limit: v = (J / 2) t^2 at s =
+    # J t^3 / 6, v = 0.5 (6 s)^(2/3) J^(1/3), far below the acceleration-limited estimate
+    rest_s = np.concatenate([layout.s_mm[layout.rest]])
+    gap = np.min(np.abs(layout.xi[:, None] - rest_s[None, :]), axis=1)
+    start = (0.5 * (6.0 * gap) ** (2.0 / 3.0) * lim.jerk_mm_s3 ** (1.0 / 3.0)) ** 2
+    return np.minimum(np.minimum(np.minimum(layout.b_estimate, layout.cap),
+                                 STATIC_REACH * static), REST_REACH * start)
 
 
 def reach_schedule(layout: Layout, lim: Limits, start: np.ndarray | None = None,

@@ -37,8 +37,9 @@ FOCUS_REL = 0.15
 MAX_LEVELS = WIDE_PROBES + FOCUS_PROBES + 2
 NEWTON_STEPS = 40
 BISECTIONS = 50  # where Newton's method meets a kink it cannot step over
-# a first guess from the next knot's set starts this share outside it
-WARM_REL = 1e-4
+# a first guess from the next knot's set starts this share outside it (a boundary moves
+# less than that from one knot to the next, mostly)
+WARM_REL = 5e-3
 RANGE_TOL_REL = 2e-3  # of the acceleration scale: how closely a set's range ends are found
 FINE_PROBES = 8  # times LEVELS probes where no coarse probe meets the set
 ROUNDING_REL = 1e-12  # of b: where the chain's peak is met exactly, rounding aside
@@ -203,67 +204,48 @@ def _bisect(wu, su, nu, wd, sd, nd, a, h, cha, chg, chl, nc, peak, valley, good,
 @jit
 def _upper_end(wu, su, nu, wd, sd, nd, a, h, cha, chg, chl, nc, peak, valley, low, high, b,
                tol):
-    """The greatest feasible b in [low, high] from a first guess b: Newton's method outward
-    while inside (the tangent of the concave gap lies above it: each step lands beyond the
-    end or on high), then inward from outside; bisection against the last feasible b where a
-    kink leaves Newton no step. -1 where no b in [low, high] is feasible."""
-    good = -1.0
+    """The greatest feasible b in [low, high], by Newton's method inward from b (the tangent
+    of the concave gap lies above it: from outside it never steps past the end), and where b
+    turns out feasible, or below the feasible interval, from high; bisection against low
+    where a kink leaves Newton no step. -1 where no b in [low, high] is feasible."""
     gap, slope = _gap(wu, su, nu, wd, sd, nd, a, b, h, cha, chg, chl, nc, peak, valley)
-    for _ in range(NEWTON_STEPS):
-        if gap < -tol:
-            break
-        good = b
-        if b >= high:
-            return b
-        step = b - gap / slope if slope < 0.0 else high
-        b = min(step, high) if step > b else high
+    if b < high and (gap >= -tol or slope > 0.0):
+        b = high
         gap, slope = _gap(wu, su, nu, wd, sd, nd, a, b, h, cha, chg, chl, nc, peak, valley)
-    floor = low if good < 0.0 else good
     for _ in range(NEWTON_STEPS):
         if gap >= -tol:
             return b
-        step = b - gap / slope if slope < 0.0 and gap > -np.inf else floor
-        if step <= floor:
-            if good < 0.0:
-                gap, _ = _gap(wu, su, nu, wd, sd, nd, a, low, h, cha, chg, chl, nc, peak,
-                              valley)
-                if gap < -tol:
-                    return -1.0
-                good = low
-            return _bisect(wu, su, nu, wd, sd, nd, a, h, cha, chg, chl, nc, peak, valley, good,
+        step = b - gap / slope if slope < 0.0 and gap > -np.inf else low
+        if step <= low:
+            gap, _ = _gap(wu, su, nu, wd, sd, nd, a, low, h, cha, chg, chl, nc, peak, valley)
+            if gap < -tol:
+                return -1.0
+            return _bisect(wu, su, nu, wd, sd, nd, a, h, cha, chg, chl, nc, peak, valley, low,
                            b, tol)
         b = step
         gap, slope = _gap(wu, su, nu, wd, sd, nd, a, b, h, cha, chg, chl, nc, peak, valley)
-    return good
+    return -1.0
 
 
 @jit
 def _lower_end(wu, su, nu, wd, sd, nd, a, h, cha, chg, chl, nc, peak, valley, low, top, b,
                tol):
-    """The least feasible b in [low, top] (top feasible) from a first guess b, as
-    `_upper_end` mirrored."""
-    good = -1.0
+    """The least feasible b in [low, top] (top feasible), as `_upper_end` mirrored: Newton's
+    method from b upward, from low where b turns out feasible or above the interval."""
     gap, slope = _gap(wu, su, nu, wd, sd, nd, a, b, h, cha, chg, chl, nc, peak, valley)
-    for _ in range(NEWTON_STEPS):
-        if gap < -tol:
-            break
-        good = b
-        if b <= low:
-            return b
-        step = b - gap / slope if slope > 0.0 else low
-        b = max(step, low) if step < b else low
+    if b > low and (gap >= -tol or slope < 0.0):
+        b = low
         gap, slope = _gap(wu, su, nu, wd, sd, nd, a, b, h, cha, chg, chl, nc, peak, valley)
-    ceiling = top if good < 0.0 else good
     for _ in range(NEWTON_STEPS):
         if gap >= -tol:
             return b
-        step = b - gap / slope if slope > 0.0 and gap > -np.inf else ceiling
-        if step >= ceiling:
-            return _bisect(wu, su, nu, wd, sd, nd, a, h, cha, chg, chl, nc, peak, valley,
-                           ceiling, b, tol)
+        step = b - gap / slope if slope > 0.0 and gap > -np.inf else top
+        if step >= top:
+            return _bisect(wu, su, nu, wd, sd, nd, a, h, cha, chg, chl, nc, peak, valley, top,
+                           b, tol)
         b = step
         gap, slope = _gap(wu, su, nu, wd, sd, nd, a, b, h, cha, chg, chl, nc, peak, valley)
-    return ceiling
+    return top
 
 
 @jit
