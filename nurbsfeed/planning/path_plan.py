@@ -19,7 +19,8 @@ from nurbsfeed.planning.grid import Grid
 from nurbsfeed.planning.limits import Limits, curvature_threshold
 from nurbsfeed.planning.nodes import cut_cells, schedule_nodes
 from nurbsfeed.planning.plan import KIND_CORNER, KIND_CUSP, KIND_END
-from nurbsfeed.planning.schedule import Schedule, cell_times, plan_schedule
+from nurbsfeed.planning.reach_schedule import reach_schedule as plan_schedule
+from nurbsfeed.planning.schedule import Schedule, cell_times
 from nurbsfeed.planning.schedule_law import schedule_law
 from nurbsfeed.planning.timelaw import TimeLaw
 
@@ -143,8 +144,8 @@ def plan_path(curve: NurbsCurve, grid: Grid, lim: Limits, limit: np.ndarray, cap
             break
         finer = build_layout(curve, grid, lim, *nodes, feed_at_u, ends)
         # linearised first at the last schedule (its polygon): it is nearly the answer
-        cut = plan_schedule(finer, lim, np.interp(finer.xi, layout.xi, schedule.c), None,
-                            slack)
+        cut = plan_schedule(finer, lim, np.interp(finer.xi, layout.xi, schedule.c),
+                            None if seed is None else seed[1:], slack)
         if not cut.solved:
             break
         layout, schedule = finer, cut

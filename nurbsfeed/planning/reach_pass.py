@@ -6,7 +6,9 @@ A stretch has Q cells between Q + 1 knots; at its start and its end it rests (af
 b = b_end y^(4/3), constant jerk from rest: at the knot beside it a = 2 b / (3 h_rest), and b is
 at most the rest cell's own cap) or moves in a given state (b, a) (a chain's window, design
 §3b). Arrays per cell (Q,): h, the geometry at its start, middle and end (Q, G_SIZE), the
-linearisation points at its middle; per knot (Q + 1,): the linearisation points and floors.
+linearisation points at its middle, its limits (Q, 10) (planning.reach_rows.limits_vector:
+looser near a moving start that needs it); per knot (Q + 1,): the linearisation points and
+floors.
 """
 
 from __future__ import annotations
@@ -32,18 +34,19 @@ from nurbsfeed.planning.reach_sets import (
     split_rows,
 )
 
-END_REST, END_MOVING = 0, 1
+END_REST, END_MOVING, END_MOVING_LOOSE = 0, 1, 2
 FORWARD_TOL_REL = 1e-9  # a row the forward pass's state breaks by less than this share holds
 U_TOL_REL = 1e-7  # an empty range of u narrower than this share of its size is rounding
 
 
 @jit
-def controllable(h, g0, gm, g1, b_knot, b_mid, floors, lim, end_kind, end_p1, end_p2, focus,
+def controllable(h, g0, gm, g1, b_knot, b_mid, floors, lims, end_kind, end_p1, end_p2, focus,
                  focused, lower, top, lev_a, lev_hi, lev_lo, lev_n):
     """The backward pass: every knot's levels (Q + 1, MAX_LEVELS) and their count (Q + 1,)
     (the last knot's are not needed: the end is folded into the last cell), from knot top
     down (the knots after it keep the levels they have). focused: probe each knot's set
-    closely around the acceleration focus (Q + 1,) of a motion already found instead. lower:
+    closely around the acceleration focus (Q + 1,) of a motion already found too (NaN where
+    none is). lower:
     find each set's lower boundary too (else the rows' own bound on b stands for it: the
     forward pass rides the upper one). Returns the knot whose set came out empty, -1 when
     none did."""
@@ -60,12 +63,13 @@ def controllable(h, g0, gm, g1, b_knot, b_mid, floors, lim, end_kind, end_p1, en
     down = np.empty((ROWS_PER_CELL + 2, 3))
     fixed = np.empty((ROWS_PER_CELL + 2, 3))
     work = np.empty((4, ROWS_PER_CELL + 2))
-    acc = lim[0]
     lev_n[q_n] = 0
     for j in range(top, -1, -1):
         n = cell_rows(g0[j], gm[j], g1[j], h[j], b_knot[j], b_mid[j], b_knot[j + 1], floors[j],
-                      floors[j + 1], lim, rows)
-        p_n = probes_around(acc, WIDE_PROBES, FOCUS_PROBES if focused else 0, focus[j],
+                      floors[j + 1], lims[j], rows)
+        acc = lims[j, 0]
+        here = focused and focus[j] == focus[j]  # (NaN: no motion known at this knot)
+        p_n = probes_around(acc, WIDE_PROBES, FOCUS_PROBES if here else 0, focus[j],
                             FOCUS_REL * acc, probes)
         if j == q_n - 1:
             n = fold_end(rows, n, h[j], end_kind, end_p1, end_p2, folded)
@@ -158,7 +162,7 @@ def _u_range(rows, n, b, a):
 
 
 @jit
-def forward(h, g0, gm, g1, b_knot, b_mid, floors, lim, start_kind, start_p1, start_p2,
+def forward(h, g0, gm, g1, b_knot, b_mid, floors, lims, start_kind, start_p1, start_p2,
             end_kind, end_p1, end_p2, lev_a, lev_hi, lev_lo, lev_n, b_out, a_out):
     """The fastest motion the sets allow: from the start, at every knot the greatest u that
     keeps the cell's rows and lands in the next knot's set (it takes b and a up together).
@@ -186,7 +190,7 @@ def forward(h, g0, gm, g1, b_knot, b_mid, floors, lim, start_kind, start_p1, sta
     for j in range(q_n):
         hj = h[j]
         n = cell_rows(g0[j], gm[j], g1[j], hj, b_knot[j], b_mid[j], b_knot[j + 1], floors[j],
-                      floors[j + 1], lim, rows)
+                      floors[j + 1], lims[j], rows)
         low, high = _u_range(rows, n, b, a)
         if j == q_n - 1:
             if end_kind == END_REST:

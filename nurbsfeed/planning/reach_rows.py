@@ -35,7 +35,7 @@ B_FLOOR = 1e-12  # the least linearisation point
 # per point at most: cap, b >= 0, 2 tangential accelerations, 6 axis accelerations, the normal
 # jerk's half polygon, 2 tangential and 6 axis jerks; per cell three points and two floors
 ROWS_PER_POINT = 2 + 2 + 6 + NORMAL_SIDES // 2 + 1 + 2 + 6
-ROWS_PER_CELL = 3 * ROWS_PER_POINT + 2
+ROWS_PER_CELL = 3 * ROWS_PER_POINT + 3
 
 
 @jit
@@ -142,6 +142,10 @@ def cell_rows(g0, gm, g1, h, b0, bm, b1, floor0, floor1, lim, rows):
     r = point_rows(g0, b0, lim, True, 0.0, 0.0, 0.0, rows, 0)
     r = point_rows(gm, bm, lim, True, h, 0.25 * h * h, 0.5 * h, rows, r)
     r = point_rows(g1, b1, lim, True, 2.0 * h, h * h, h, rows, r)
+    # the quadratic's middle control point b + h a under the lowest of the three caps: with
+    # its ends under theirs, b stays under the caps all along the cell, not just at the three
+    # points (a cell ending at the cap, its middle just below, bulges over it in between)
+    r = _put(rows, r, 1.0, 0.0, 0.0, min(g0[G_CAP], gm[G_CAP], g1[G_CAP]), h, 0.0, 0.0)
     if floor0 > 0.0:
         r = _put(rows, r, -1.0, 0.0, 0.0, -floor0, 0.0, 0.0, 0.0)
     if floor1 > 0.0:

@@ -23,6 +23,7 @@ from nurbsfeed.planning.cells import Layout
 from nurbsfeed.planning.limits import Limits
 from nurbsfeed.planning.reach_pass import (
     END_MOVING,
+    END_MOVING_LOOSE,
     END_REST,
     controllable,
     forward,
@@ -41,9 +42,11 @@ EXTRA_ROUNDS = 0
 LOWER = True
 FLOOR_SHARE = 0.9
 FLOOR_KEEP = 0.95
+SEED_KEEP = 0.995
 # floors that leave a knot's set empty are lowered by this factor, this many times at most
 FLOOR_RELAX = 0.9
 FLOOR_RELAXATIONS = 4
+FLOOR_WINDOW = 24
 # an empty set without floors to blame: the linearisation this many knots around it (a quarter
 # of them upstream) lowered by LIN_LOWER, LIN_RETRIES times at most
 LIN_WINDOW = 24
@@ -67,12 +70,13 @@ def _levels(q_n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
             np.zeros(n, dtype=np.int64))
 
 
-def _backward(geometry: tuple, lim: np.ndarray, floors: np.ndarray, lin_knot: np.ndarray,
+def _backward(geometry: tuple, lims: np.ndarray, floors: np.ndarray, lin_knot: np.ndarray,
               lin_mid: np.ndarray, focus: np.ndarray | None, end: tuple
               ) -> tuple[tuple, np.ndarray, np.ndarray, np.ndarray] | None:
     """The backward pass over a stretch (geometry = h, g0, gm, g1), with what it had to give
-    up on its way: where a knot's set comes out empty, the first run of floors from there on
-    asks more than the sets allow and is lowered (at last dropped); where there is none, the
+    up on its way: where a knot's set comes out empty, the first floors from there on (a run
+    of FLOOR_WINDOW knots at most) ask more than the sets allow and are lowered (at last
+    dropped); where there are none, the
     sets went too thin at low speed, where the rows' tangents to J / sqrt(b), taken far above
     the speed the motion has there, leave it too little jerk: the linearisation is lowered
     around the knot (up to LIN_RETRIES times). The pass resumes downstream of the change.
@@ -85,7 +89,7 @@ def _backward(geometry: tuple, lim: np.ndarray, floors: np.ndarray, lin_knot: np
     lowered = 0
     top = q_n - 1
     while True:
-        empty = controllable(*geometry, lin_knot, lin_mid, floors, lim, *end,
+        empty = controllable(*geometry, lin_knot, lin_mid, floors, lims, *end,
                              focus if focused else lin_knot, focused, LOWER, top, *sets)
         if empty < 0:
             return sets, floors, lin_knot, lin_mid
@@ -93,8 +97,9 @@ def _backward(geometry: tuple, lim: np.ndarray, floors: np.ndarray, lin_knot: np
         while start <= q_n and floors[start] == 0.0:
             start += 1
         if start <= q_n:
+            # the floors of the run from there, FLOOR_WINDOW knots of it at most: lowered
             run = start
-            while run + 1 <= q_n and floors[run + 1] > 0.0:
+            while run + 1 <= min(q_n, start + FLOOR_WINDOW) and floors[run + 1] > 0.0:
                 run += 1
             lowest = asked[start] * FLOOR_RELAX ** FLOOR_RELAXATIONS
             floors[start:run + 1] *= FLOOR_RELAX if floors[start] > lowest else 0.0
@@ -114,7 +119,8 @@ def _backward(geometry: tuple, lim: np.ndarray, floors: np.ndarray, lin_knot: np
 class _Stretch:
     """One stretch's arrays for the passes (module docstring of planning.reach_pass)."""
 
-    def __init__(self, layout: Layout, s: int, q0: int, lin: np.ndarray) -> None:
+    def __init__(self, layout: Layout, s: int, q0: int, lin: np.ndarray,
+                 motion: np.ndarray, lim: Limits, seeded: np.ndarray) -> None:
         first, last = int(layout.first[s]), int(layout.last[s])
         self.first, self.last = first, last
         q_n = last - first - 1
@@ -135,44 +141,64 @@ class _Stretch:
         xs = 0.5 * hh
         mid = w0 * c[:-2] + (1.0 - w0) * c[1:-1] + s0 * xs + 0.5 * (s1 - s0) / hh * xs * xs
         self.lin_mid = np.maximum(mid, B_FLOOR)
+        # the acceleration the linearisation has at each knot (b' / 2, the polygon's slope
+        # there), where it comes from a motion (a seed) rather than an estimate: NaN elsewhere
+        slope = np.diff(c) / np.diff(layout.xi[first:last + 1])
+        known = motion[first:last] & motion[first + 1:last + 1]
+        self.lin_focus = np.where(known, 0.5 * slope, np.nan)
+        # a seed is the plan this one takes over from: at least SEED_KEEP of its b where the
+        # two overlap, so that a motion handed on does not fall behind the one it continues
+        on_seed = seeded[first:last] & seeded[first + 1:last + 1]
+        self.seed_floor = np.where(on_seed, SEED_KEEP * self.lin_knot, 0.0)
         self.start = (END_REST, float(layout.rest_h[s, 0]), float(layout.cap[first]))
-        if layout.is_open(s, 0):
-            b, c1 = layout.fixed[0]
-            self.start = (END_MOVING, float(b), float((c1 - b) / self.h[0]))
         self.end = (END_REST, float(layout.rest_h[s, 1]), float(layout.cap[last]))
-        if layout.is_open(s, 1):
-            c0, b = layout.fixed[1]
-            self.end = (END_MOVING, float(b), float((b - c0) / self.h[-1]))
+        knot_s = np.concatenate(([0.0], np.cumsum(self.h)))
+        for side in range(2):
+            if not layout.is_open(s, side):
+                continue
+            if side == 0:
+                b, c1 = layout.fixed[0]
+                a = (c1 - b) / self.h[0]
+                self.start = (END_MOVING, float(b), float(a))
+                near = knot_s <= _moving_reach(b, lim)
+            else:
+                c0, b = layout.fixed[1]
+                a = (b - c0) / self.h[-1]
+                self.end = (END_MOVING, float(b), float(a))
+                near = knot_s >= knot_s[-1] - _moving_reach(b, lim)
+            # where nothing is known of the motion, it stays near the state it is given for
+            # a while: the sets are probed closely around that acceleration there
+            self.lin_focus = np.where(near & np.isnan(self.lin_focus), a, self.lin_focus)
 
     def levels(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         return _levels(self.q_n)
 
-    def plan(self, lim: np.ndarray, floors: np.ndarray, lin_knot: np.ndarray,
+    def plan(self, lims: np.ndarray, floors: np.ndarray, lin_knot: np.ndarray,
              lin_mid: np.ndarray, focus: np.ndarray | None = None
              ) -> tuple[np.ndarray, np.ndarray, tuple] | None:
         """Backward and forward pass: the motion (b, a) at the knots and the sets; None where
         a set came out empty or the forward pass found no way on. focus: the acceleration
         (Q + 1,) of a motion found before, where the sets are probed closely."""
         geometry = (self.h, self.g0, self.gm, self.g1)
-        made = _backward(geometry, lim, floors, lin_knot, lin_mid, focus, self.end)
+        made = _backward(geometry, lims, floors, lin_knot, lin_mid, focus, self.end)
         if made is None:
             return None
         sets, floors, lin_knot, lin_mid = made
         b = np.empty(self.q_n + 1)
         a = np.empty(self.q_n + 1)
-        if forward(*geometry, lin_knot, lin_mid, floors, lim, *self.start, *self.end, *sets,
+        if forward(*geometry, lin_knot, lin_mid, floors, lims, *self.start, *self.end, *sets,
                    b, a) >= 0:
             return None
         return b, a, sets
 
-    def reachable(self, lim: np.ndarray, lin_knot: np.ndarray, lin_mid: np.ndarray
+    def reachable(self, lims: np.ndarray, lin_knot: np.ndarray, lin_mid: np.ndarray
                   ) -> tuple | None:
         """The sets of the stretch run backwards: the states reachable from its start."""
-        end = self.start if self.start[0] == END_REST else (END_MOVING, self.start[1],
+        end = self.start if self.start[0] == END_REST else (END_MOVING_LOOSE, self.start[1],
                                                              -self.start[2])
         geometry = (np.ascontiguousarray(self.h[::-1]), _reversed_geometry(self.g1),
                     _reversed_geometry(self.gm), _reversed_geometry(self.g0))
-        made = _backward(geometry, lim, np.zeros(self.q_n + 1),
+        made = _backward(geometry, np.ascontiguousarray(lims[::-1]), np.zeros(self.q_n + 1),
                          np.ascontiguousarray(lin_knot[::-1]),
                          np.ascontiguousarray(lin_mid[::-1]), None, end)
         return None if made is None else made[0]
@@ -196,6 +222,12 @@ def _mid_values(h: np.ndarray, b: np.ndarray, a: np.ndarray) -> np.ndarray:
     return b[:-1] + h * a[:-1] + 0.25 * h * h * u
 
 
+def _coarse_limits(lims: np.ndarray, q_n: int, step: int) -> np.ndarray:
+    """Per coarse cell: the loosest limits of the fine cells it merges (the guide only)."""
+    starts = np.arange(0, q_n, step)
+    return np.ascontiguousarray(np.maximum.reduceat(lims, starts, axis=0))
+
+
 def _coarse(st: _Stretch, step: int) -> tuple[_Stretch, np.ndarray]:
     """The stretch on every step-th knot (its cells merged), and the fine knots' arc lengths
     from the start (Q + 1,) with the coarse knots' positions among them."""
@@ -217,21 +249,24 @@ def _coarse(st: _Stretch, step: int) -> tuple[_Stretch, np.ndarray]:
     co.lin_knot = np.ascontiguousarray(st.lin_knot[knots])
     co.lin_mid = np.ascontiguousarray(np.where(even, st.lin_knot[mid_cell + 1],
                                                st.lin_mid[mid_cell]))
+    co.lin_focus = np.ascontiguousarray(st.lin_focus[knots])
     co.start, co.end = st.start, st.end
     return co, s
 
 
-def _plan_stretch(st: _Stretch, lim: np.ndarray) -> tuple[np.ndarray, np.ndarray, int] | None:
+def _plan_stretch(st: _Stretch, lims: np.ndarray) -> tuple[np.ndarray, np.ndarray, int] | None:
     """The motion of one stretch (module docstring): (b, a) at its knots and the passes run."""
     no_floor = np.zeros(st.q_n + 1)
     co, s = _coarse(st, COARSE) if COARSE > 1 else (st, None)
-    first = co.plan(lim, np.zeros(co.q_n + 1), co.lin_knot, co.lin_mid)
+    co_lims = lims if co is st else _coarse_limits(lims, st.q_n, COARSE)
+    first = co.plan(co_lims, np.zeros(co.q_n + 1), co.lin_knot, co.lin_mid,
+                    co.lin_focus if np.any(co.lin_focus == co.lin_focus) else None)
     if first is None:
         return None
     b1, a1, k_sets = first
     passes = 2
     bound = None
-    r_sets = co.reachable(lim, co.lin_knot, co.lin_mid)
+    r_sets = co.reachable(co_lims, co.lin_knot, co.lin_mid)
     if r_sets is not None:
         passes += 1
         bound = np.empty(co.q_n + 1)
@@ -246,19 +281,22 @@ def _plan_stretch(st: _Stretch, lim: np.ndarray) -> tuple[np.ndarray, np.ndarray
         b1, a1 = b1[cell] + x * (2.0 * a1[cell] + u[cell] * x), a1[cell] + u[cell] * x
         if bound is not None:
             bound = np.interp(s, sk, bound)
-    floors = no_floor
+    floors = st.seed_floor.copy()
     if bound is not None:
-        floors = np.where(b1 < FLOOR_SHARE * bound, FLOOR_KEEP * bound, 0.0)
-        floors[0] = floors[-1] = 0.0
+        floors = np.maximum(floors, np.where(b1 < FLOOR_SHARE * bound, FLOOR_KEEP * bound, 0.0))
+    floors[0] = floors[-1] = 0.0
     lin_knot = np.maximum(np.maximum(b1, floors), B_FLOOR)
     lin_mid = np.maximum(np.maximum(_mid_values(st.h, b1, a1),
                                     0.5 * (floors[1:] + floors[:-1])), B_FLOOR)
     best = None
     if s is None:
         best = (b1, a1, st.time(b1, a1))
+    # probed around the first motion, and around a seed's (the plan this one takes over
+    # from) where there is one: the motion it continues rides those boundaries
+    focus = np.where(np.isnan(st.lin_focus), a1, st.lin_focus)
     for f in ((floors, no_floor) if floors.any() else (no_floor,)):
         passes += 2
-        again = st.plan(lim, f, lin_knot, lin_mid, a1)
+        again = st.plan(lims, f, lin_knot, lin_mid, focus)
         if again is None:
             continue
         t = st.time(again[0], again[1])
@@ -270,7 +308,7 @@ def _plan_stretch(st: _Stretch, lim: np.ndarray) -> tuple[np.ndarray, np.ndarray
     for _ in range(EXTRA_ROUNDS):
         b2, a2 = best[0], best[1]
         passes += 2
-        again = st.plan(lim, floors, np.maximum(b2, B_FLOOR),
+        again = st.plan(lims, floors, np.maximum(b2, B_FLOOR),
                         np.maximum(_mid_values(st.h, b2, a2), B_FLOOR), a2)
         if again is None:
             break
@@ -278,6 +316,12 @@ def _plan_stretch(st: _Stretch, lim: np.ndarray) -> tuple[np.ndarray, np.ndarray
         if t < best[2]:
             best = (again[0], again[1], t)
     return best[0], best[1], passes
+
+
+def _moving_reach(b: float, lim: Limits) -> float:
+    """How far a motion in state b stays near it: v (v / A + A / J), braking from v."""
+    v = math.sqrt(max(b, 0.0))
+    return v * (v / lim.acc_mm_s2 + lim.acc_mm_s2 / lim.jerk_mm_s3)
 
 
 def _estimate(layout: Layout, lim: Limits) -> np.ndarray:
@@ -295,11 +339,25 @@ def _estimate(layout: Layout, lim: Limits) -> np.ndarray:
         np.minimum.at(static, i0 + j, sb.min(axis=1))
     # beside a rest the motion leaves (reaches) it with the jerk limit: v = (J / 2) t^2 at s =
     # J t^3 / 6, v = 0.5 (6 s)^(2/3) J^(1/3), far below the acceleration-limited estimate
-    rest_s = np.concatenate([layout.s_mm[layout.rest]])
-    gap = np.min(np.abs(layout.xi[:, None] - rest_s[None, :]), axis=1)
-    start = (0.5 * (6.0 * gap) ** (2.0 / 3.0) * lim.jerk_mm_s3 ** (1.0 / 3.0)) ** 2
-    return np.minimum(np.minimum(np.minimum(layout.b_estimate, layout.cap),
-                                 STATIC_REACH * static), REST_REACH * start)
+    rest_s = layout.s_mm[layout.rest]
+    if layout.moving[0]:
+        rest_s = rest_s[1:]
+    if layout.moving[1]:
+        rest_s = rest_s[:-1]
+    lin = np.minimum(np.minimum(layout.b_estimate, layout.cap), STATIC_REACH * static)
+    if rest_s.size:
+        gap = np.min(np.abs(layout.xi[:, None] - rest_s[None, :]), axis=1)
+        start = (0.5 * (6.0 * gap) ** (2.0 / 3.0) * lim.jerk_mm_s3 ** (1.0 / 3.0)) ** 2
+        lin = np.minimum(lin, REST_REACH * start)
+    # a moving end's own state: the motion stays near it for as long as the limits take to
+    # change it, v (v / A + A / J)
+    for side in range(2):
+        if layout.moving[side]:
+            b_end = layout.fixed[side, 1 - side]
+            x_end = layout.xi[0] if side == 0 else layout.xi[-1]
+            near = np.abs(layout.xi - x_end) <= _moving_reach(b_end, lim)
+            lin[near] = np.maximum(lin[near], b_end)
+    return lin
 
 
 def reach_schedule(layout: Layout, lim: Limits, start: np.ndarray | None = None,
@@ -311,33 +369,43 @@ def reach_schedule(layout: Layout, lim: Limits, start: np.ndarray | None = None,
     moving start loosened by that share, for a start in a state the limits there leave no
     way on from (planning.path_plan)."""
     lin = _estimate(layout, lim) if start is None else np.array(start)
+    motion = np.full(lin.size, start is not None)
+    seeded = np.zeros(lin.size, dtype=bool)
     if seed is not None:
         span = 1e-9 * max(float(layout.xi[-1]), 1.0)
         inside = (layout.xi >= seed[0][0] - span) & (layout.xi <= seed[0][-1] + span)
         lin[inside] = np.interp(layout.xi[inside], *seed)
+        motion |= inside
+        seeded = inside
+    # a moving end's state is the linearisation's there too
+    lin[layout.fixed_index] = layout.fixed_values
+    motion[layout.fixed_index] = True
     limits = limits_vector(lim)
-    if slack[0] > 0.0:
-        limits[:3] *= 1.0 + slack[0]
-        limits[4:] *= 1.0 + slack[0]
+    near = np.zeros(layout.cells.shape[0], dtype=bool)
+    if slack[0] > 0.0 and layout.moving[0]:
+        near = layout.s_mm[layout.cell_node] <= layout.s_mm[0] + slack[1]
+    lims = np.repeat(limits[None, :], layout.cells.shape[0], axis=0)
+    lims[near, :3] *= 1.0 + slack[0]
+    lims[near, 4:] *= 1.0 + slack[0]
     c = np.minimum(lin, layout.cap).astype(float)
     solved = True
     passes = 0
     q0 = 0
     for s in range(layout.first.size):
-        st = _Stretch(layout, s, q0, lin)
+        st = _Stretch(layout, s, q0, lin, motion, lim, seeded)
         q0 += st.q_n
-        made = _plan_stretch(st, limits)
+        made = _plan_stretch(st, np.ascontiguousarray(lims[q0 - st.q_n:q0]))
         if made is None:
             solved = False
             continue
         st.coefficients(made[0], made[1], c)
         passes += made[2]
     c[layout.fixed_index] = layout.fixed_values
-    return _schedule(layout, lim, c, passes, solved)
+    return _schedule(layout, lim, c, passes, solved, near, slack[0])
 
 
-def _schedule(layout: Layout, lim: Limits, c: np.ndarray, passes: int, solved: bool
-              ) -> Schedule:
+def _schedule(layout: Layout, lim: Limits, c: np.ndarray, passes: int, solved: bool,
+              near: np.ndarray, slack_rel: float) -> Schedule:
     """The coefficients c as a Schedule: their cycle, the slowdown their exact check at every
     cell's points asks, the cells they break a limit in between those points."""
     acc_x = np.array(lim.axis_acc_mm_s2, dtype=float)
@@ -353,6 +421,10 @@ def _schedule(layout: Layout, lim: Limits, c: np.ndarray, passes: int, solved: b
     cell_ratios(c, layout.cells, layout.between, np.array(BETWEEN), lim.jerk_mm_s3,
                 lim.acc_mm_s2, lim.normal_jerk_mm_s3, acc_x, vel_x, jerk_x, lim.period_s,
                 between)
+    # what the slack near a moving start allows is no slowdown: an acceleration's share is the
+    # square of one
+    for r in (ratios, between):
+        r[near] /= (1.0 + slack_rel) ** 0.5
     slowdown = max(1.0, float(ratios.max(initial=0.0)))
     if not math.isfinite(cycle):
         solved = False

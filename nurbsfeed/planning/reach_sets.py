@@ -48,6 +48,10 @@ GAP_TOL_REL = 1e-9  # of the acceleration scale: a gap this far below 0 still co
 # a state on an edge must keep a way on within rounding
 SHRINK_REL = 1e-7
 INFEASIBLE = -1.0
+# a moving end is met within this share of its b: its set is a line, kept this thick
+MOVING_END_REL = 1e-6
+# ... or, for the reachable sets (what they give is a bound, not a motion), this much
+LOOSE_END_REL = 1e-3
 
 
 @jit
@@ -461,7 +465,8 @@ def fold_end(rows, n, h, end_kind, p1, p2, out):
     (u = 0 in them) into out; returns the count. end_kind 0: a rest after a rest cell p1 long
     whose far value is at most p2 (b = b_end y^(4/3): at the knot a = -2 b / (3 p1), so
     u = -(b + (2 h + 1.5 p1) a) / (h^2 + 1.5 p1 h)); 1: a moving end in state (b, a) = (p1,
-    p2) (u = (p2 - a) / h, and b = p1 - h (a + p2), two rows)."""
+    p2) (u = (p2 - a) / h, and b = p1 - h (a + p2), two rows, MOVING_END_REL apart; 2: the
+    same, LOOSE_END_REL apart)."""
     if end_kind == 0:
         den = h * h + 1.5 * p1 * h
         pb, pa, p0 = -1.0 / den, -(2.0 * h + 1.5 * p1) / den, 0.0
@@ -489,6 +494,7 @@ def fold_end(rows, n, h, end_kind, p1, p2, out):
             out[m, 0] = sign
             out[m, 1] = sign * h
             out[m, 2] = 0.0
-            out[m, 3] = sign * (p1 - h * p2) + 1e-9 * scale
+            out[m, 3] = sign * (p1 - h * p2) + (MOVING_END_REL if end_kind == 1
+                                                else LOOSE_END_REL) * scale
             m += 1
     return m

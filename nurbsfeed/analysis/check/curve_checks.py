@@ -341,11 +341,19 @@ def _check_arc_kinematics(curve: NurbsCurve, lim: Limits, ug: np.ndarray, tg: np
     span_s = tg[after] - tg[before]
     v = np.abs(s[after] - s[before]) / span_s
     skew = np.abs(tg[after] + tg[before] - 2.0 * tg)
-    e_v = ((e[after] + e[before]) / span_s + lim.jerk_mm_s3 * span_s**2 / 24.0
-           + lim.acc_mm_s2 * skew / 2.0)
     du = e / np.maximum(curve.speed(ug), 1e-300)
-    k_low = np.minimum(kappa, np.minimum(curvature_1_mm(curve, np.maximum(ug - du, curve.u_min)),
-                                         curvature_1_mm(curve, np.minimum(ug + du, curve.u_max))))
+    k_before = curvature_1_mm(curve, np.maximum(ug - du, curve.u_min))
+    k_after = curvature_1_mm(curve, np.minimum(ug + du, curve.u_max))
+    k_low = np.minimum(kappa, np.minimum(k_before, k_after))
+    # the central difference of s over two periods is v to within the law's jerk j span^2 / 24:
+    # under the paper model |j| <= J_t; under the path model only j - kappa^2 v^3 is held to
+    # J_t, and at a narrow peak passed at its limit j follows kappa^2 v^3, many times J_t
+    jerk_bound = np.full(ug.size, lim.jerk_mm_s3)
+    if lim.jerk_model == "path":
+        k_high = np.maximum(kappa, np.maximum(k_before, k_after))
+        jerk_bound = jerk_bound + k_high**2 * v**3
+    e_v = ((e[after] + e[before]) / span_s + jerk_bound * span_s**2 / 24.0
+           + lim.acc_mm_s2 * skew / 2.0)
     proxies = [("normal-acc", 2, lim.normal_acc_mm_s2)]
     if lim.jerk_model == "paper":  # under `path` the jerk vector from positions stands instead
         proxies.append(("normal-jerk", 3, lim.normal_jerk_mm_s3))
