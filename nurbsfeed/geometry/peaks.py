@@ -303,6 +303,26 @@ def holds_any(sorted_u, low, high):
     return q < sorted_u.size and sorted_u[q] <= high
 
 
+@jit
+def sorted_union(a, b):
+    """The values of a (A,) and b (B,) in one array, ascending (with repeats): an insertion
+    sort, fast on the few and mostly sorted values the grid sorts, where numba's np.sort would
+    compile a quicksort of its own for seconds of the first run."""
+    out = np.empty(a.size + b.size)
+    for i in range(a.size):
+        out[i] = a[i]
+    for i in range(b.size):
+        out[a.size + i] = b[i]
+    for i in range(1, out.size):
+        x = out[i]
+        j = i - 1
+        while j >= 0 and out[j] > x:
+            out[j + 1] = out[j]
+            j -= 1
+        out[j + 1] = x
+    return out
+
+
 def near_cusp_peaks(knots, coef, degree, u, kappa, near_u, kappa_floor):
     """Step 2c: the curvature peaks of near cusps (R,) that the samples do not show.
 
