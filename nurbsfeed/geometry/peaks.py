@@ -297,6 +297,21 @@ def first_at_or_above(sorted_x, x):
 
 
 @jit
+def first_above(sorted_x, x):
+    """The first index q with sorted_x[q] > x (sorted_x.size if none): np.searchsorted's right
+    side (see `first_at_or_above`)."""
+    lo = 0
+    hi = sorted_x.size
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if sorted_x[mid] <= x:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@jit
 def holds_any(sorted_u, low, high):
     """Whether sorted_u (K,) has a value in [low, high]."""
     q = first_at_or_above(sorted_u, low)
