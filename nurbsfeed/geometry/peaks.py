@@ -128,8 +128,8 @@ def _brent_max(knots, coef, degree, span, a, b, x, kappa_x, tol):
 
 
 @jit
-def refine_peak(knots, coef, degree, low, high, kappa_floor):
-    """Step 2b: the maximum of kappa in [low, high] (u, kappa).
+def refine_peaks(knots, coef, degree, lows, highs, kappa_floor):
+    """Step 2b: the maximum of kappa in each bracket [lows[k], highs[k]] (P,): u, kappa (P,).
 
     kappa is smooth inside a span; at a knot it may have a kink, or a jump where the curve is
     only C1 there. First, ZOOM_SAMPLES evenly spaced samples, and every knot inside with the
@@ -139,68 +139,75 @@ def refine_peak(knots, coef, degree, low, high, kappa_floor):
     the knots inside it, which are candidates from both sides; a piece whose inside holds a
     point above both its ends (the best sample, or a probe just inside a knot end where kappa
     rises into the piece) is searched by `_brent_max` on its own span's polynomial, and on any
-    other piece the maximum is at an end.
+    other piece the maximum is at an end. All brackets in one call: the grid has dozens.
     """
     n_ctrl = coef.shape[0]
     last = ZOOM_SAMPLES - 1
-    width = high - low
-    step = width / last
-    best_i = 0
-    best_k = -1.0
-    span = degree
-    for i in range(ZOOM_SAMPLES):
-        u = low + width * (i / last) if i < last else high
-        span = find_span(knots, degree, n_ctrl, u, span)
-        c = point_d2(knots, coef, degree, span, u)
-        kappa, _ = curvature(c[3], c[4], c[5], c[6], c[7], c[8])
-        if kappa > best_k:  # the first maximum; NaN (C' = 0) never wins
-            best_k = kappa
-            best_i = i
-    best_u = low + width * (best_i / last) if best_i < last else high
-    a = low + width * (max(best_i - 1, 0) / last)
-    b = low + width * ((best_i + 1) / last) if best_i + 1 < last else high
-    span = find_span(knots, degree, n_ctrl, low, degree)
-    while knots[span + 1] < high:  # the knots inside, from both sides
-        knot = knots[span + 1]
-        kappa = _kappa_on_span(knots, coef, degree, span, knot)
-        span = find_span(knots, degree, n_ctrl, knot, span)
-        kappa = max(kappa, _kappa_on_span(knots, coef, degree, span, knot))
-        if kappa > best_k:
-            best_u, best_k = knot, kappa
-            a, b = max(low, knot - step), min(high, knot + step)
-    if best_k < 0.5 * kappa_floor:
-        return best_u, best_k
-    tol = PEAK_BRACKET_REL * width
-    inside_u = best_u
-    inside_k = best_k
-    piece_low = a
-    span = find_span(knots, degree, n_ctrl, a, degree)
-    while True:
-        piece_high = min(b, knots[span + 1])
-        k_low = _kappa_on_span(knots, coef, degree, span, piece_low)
-        k_high = _kappa_on_span(knots, coef, degree, span, piece_high)
-        for u, kappa in ((piece_low, k_low), (piece_high, k_high)):
+    peak_u = np.empty(lows.size)
+    peak_k = np.empty(lows.size)
+    for p in range(lows.size):
+        low = lows[p]
+        high = highs[p]
+        width = high - low
+        step = width / last
+        best_i = 0
+        best_k = -1.0
+        span = degree
+        for i in range(ZOOM_SAMPLES):
+            u = low + width * (i / last) if i < last else high
+            span = find_span(knots, degree, n_ctrl, u, span)
+            c = point_d2(knots, coef, degree, span, u)
+            kappa, _ = curvature(c[3], c[4], c[5], c[6], c[7], c[8])
+            if kappa > best_k:  # the first maximum; NaN (C' = 0) never wins
+                best_k = kappa
+                best_i = i
+        best_u = low + width * (best_i / last) if best_i < last else high
+        a = low + width * (max(best_i - 1, 0) / last)
+        b = low + width * ((best_i + 1) / last) if best_i + 1 < last else high
+        span = find_span(knots, degree, n_ctrl, low, degree)
+        while knots[span + 1] < high:  # the knots inside, from both sides
+            knot = knots[span + 1]
+            kappa = _kappa_on_span(knots, coef, degree, span, knot)
+            span = find_span(knots, degree, n_ctrl, knot, span)
+            kappa = max(kappa, _kappa_on_span(knots, coef, degree, span, knot))
             if kappa > best_k:
-                best_u, best_k = u, kappa
-        if piece_high - piece_low > 4.0 * tol:
-            start_u, start_k = piece_low, -1.0
-            if piece_low < inside_u < piece_high:
-                start_u, start_k = inside_u, inside_k
-            for end, into in ((piece_low, 1.0), (piece_high, -1.0)):
-                if a < end < b:  # a knot
-                    u = end + into * KNOT_PROBE_REL * width
-                    kappa = _kappa_on_span(knots, coef, degree, span, u)
-                    if kappa > start_k:
-                        start_u, start_k = u, kappa
-            if start_k > max(k_low, k_high):
-                u, kappa = _brent_max(knots, coef, degree, span, piece_low, piece_high,
-                                      start_u, start_k, tol)
-                if kappa > best_k:
-                    best_u, best_k = u, kappa
-        if piece_high >= b:
-            return best_u, best_k
-        piece_low = piece_high
-        span = find_span(knots, degree, n_ctrl, piece_low, span)
+                best_u, best_k = knot, kappa
+                a, b = max(low, knot - step), min(high, knot + step)
+        if best_k >= 0.5 * kappa_floor:
+            tol = PEAK_BRACKET_REL * width
+            inside_u = best_u
+            inside_k = best_k
+            piece_low = a
+            span = find_span(knots, degree, n_ctrl, a, degree)
+            while True:
+                piece_high = min(b, knots[span + 1])
+                k_low = _kappa_on_span(knots, coef, degree, span, piece_low)
+                k_high = _kappa_on_span(knots, coef, degree, span, piece_high)
+                for u, kappa in ((piece_low, k_low), (piece_high, k_high)):
+                    if kappa > best_k:
+                        best_u, best_k = u, kappa
+                if piece_high - piece_low > 4.0 * tol:
+                    start_u, start_k = piece_low, -1.0
+                    if piece_low < inside_u < piece_high:
+                        start_u, start_k = inside_u, inside_k
+                    for end, into in ((piece_low, 1.0), (piece_high, -1.0)):
+                        if a < end < b:  # a knot
+                            u = end + into * KNOT_PROBE_REL * width
+                            kappa = _kappa_on_span(knots, coef, degree, span, u)
+                            if kappa > start_k:
+                                start_u, start_k = u, kappa
+                    if start_k > max(k_low, k_high):
+                        u, kappa = _brent_max(knots, coef, degree, span, piece_low,
+                                              piece_high, start_u, start_k, tol)
+                        if kappa > best_k:
+                            best_u, best_k = u, kappa
+                if piece_high >= b:
+                    break
+                piece_low = piece_high
+                span = find_span(knots, degree, n_ctrl, piece_low, span)
+        peak_u[p] = best_u
+        peak_k[p] = best_k
+    return peak_u, peak_k
 
 
 @jit
@@ -318,33 +325,13 @@ def holds_any(sorted_u, low, high):
     return q < sorted_u.size and sorted_u[q] <= high
 
 
-@jit
-def sorted_union(a, b):
-    """The values of a (A,) and b (B,) in one array, ascending (with repeats): an insertion
-    sort, fast on the few and mostly sorted values the grid sorts, where numba's np.sort would
-    compile a quicksort of its own for seconds of the first run."""
-    out = np.empty(a.size + b.size)
-    for i in range(a.size):
-        out[i] = a[i]
-    for i in range(b.size):
-        out[a.size + i] = b[i]
-    for i in range(1, out.size):
-        x = out[i]
-        j = i - 1
-        while j >= 0 and out[j] > x:
-            out[j + 1] = out[j]
-            j -= 1
-        out[j + 1] = x
-    return out
-
-
 def near_cusp_peaks(knots, coef, degree, u, kappa, near_u, kappa_floor):
     """Step 2c: the curvature peaks of near cusps (R,) that the samples do not show.
 
     Where |C'| dips close to 0 without reaching it (the path turns back in a hairpin of a
     radius far below the sample spacing), kappa ~ 1/|C'|^2 peaks in a needle whose width in u
     is ~|C'|/|C''| there: neither neighbouring sample holds it, and sampling their bracket
-    (`refine_peak`) can step over it. Seen on a degree-4 curve: samples 3,777 and 6,087 1/mm
+    (`refine_peaks`) can step over it. Seen on a degree-4 curve: samples 3,777 and 6,087 1/mm
     either side of a peak of 2.4e7, which the plan then passed at 0.11 mm/s, its velocity
     reversing within one period. The peak lies beside the minimum of |C'|: each near cusp
     whose kappa reaches kappa_floor and exceeds both samples around it is refined over a few
@@ -366,7 +353,8 @@ def near_cusp_peaks(knots, coef, degree, u, kappa, near_u, kappa_floor):
         if acc0 > 0.0:
             width = NEEDLE_WIDTHS * speed0 / acc0
             low, high = max(low, u0 - width), min(high, u0 + width)
-        peak, peak_k = refine_peak(knots, coef, degree, low, high, kappa_floor)
-        out[n] = peak if peak_k > k0 else u0
+        peak, peak_k = refine_peaks(knots, coef, degree, np.array([low]), np.array([high]),
+                                    kappa_floor)
+        out[n] = peak[0] if peak_k[0] > k0 else u0
         n += 1
     return out[:n]

@@ -54,7 +54,8 @@ def samples(knots, coef, degree, breaks, spacing_mm):
     mean of |C'| over the nodes (summed in order). At an interior knot kappa is the higher of
     its limits from the two sides (it jumps where the curve is only C1), so that no node
     understates the curvature around it; a side where |C'| is below ZERO_SPEED_REL of the
-    other's does not count (its kappa is rounding noise)."""
+    other's does not count (its kappa is rounding noise). Where |C'| is at most ZERO_SPEED_REL
+    of its mean, C' = 0 and kappa is its limit from inside (`fill_singular`)."""
     n_ctrl = coef.shape[0]
     n_spans = breaks.size - 1
     counts = np.empty(n_spans, dtype=np.int64)
@@ -105,7 +106,12 @@ def samples(knots, coef, degree, breaks, spacing_mm):
     total_speed = 0.0
     for q in range(speed.size):
         total_speed += speed[q]
-    return u_nodes, kappa, speed, pts, d1, tan, total_speed / speed.size
+    mean_speed = total_speed / speed.size
+    for q in range(speed.size):
+        if speed[q] <= ZERO_SPEED_REL * mean_speed:
+            kappa[q] = math.nan
+    fill_singular(kappa)
+    return u_nodes, kappa, speed, pts, d1, tan, mean_speed
 
 
 @jit
@@ -133,7 +139,7 @@ def fill_singular(kappa):
 def merge(knots, coef, degree, u, kappa, speed, pts, d1, tan, extra, zero_speed):
     """Step 4a: the sorted union of the nodes and the sorted extra parameters, with kappa,
     |C'|, C, C' and the unit tangent (a parameter that is already a node keeps the node's
-    values; kappa NaN where |C'| is 0)."""
+    values; where |C'| is at most zero_speed, kappa is its limit from inside, `fill_singular`)."""
     n_ctrl = coef.shape[0]
     size = u.size + extra.size
     u_out = np.empty(size)
@@ -172,6 +178,7 @@ def merge(knots, coef, degree, u, kappa, speed, pts, d1, tan, extra, zero_speed)
             node_values(c, p_out, d_out, t_out, n)
             j += 1
         n += 1
+    fill_singular(k_out[:n])
     return u_out[:n], k_out[:n], s_out[:n], p_out[:n], d_out[:n], t_out[:n]
 
 
@@ -184,16 +191,17 @@ def _tangent_chord_cos(tan, pts, moving, q, r, chord):
 
 
 @jit
-def _hidden_bump(knots, coef, degree, low, high_u, high_kappa, kappa_floor, zero_speed):
+def _hidden_bump(knots, coef, degree, low, high_u, high_kappa, kappa_floor, zero_speed, span):
     """Whether kappa at the middle of [low, high_u] is above kappa_floor and more than
     KAPPA_STEP_REL above the higher of its ends: a maximum the ends do not show (fuzz seed 45:
-    kappa 14.7 and 14.6 at the ends of the first interval after a knot, 23.1 between them)."""
+    kappa 14.7 and 14.6 at the ends of the first interval after a knot, 23.1 between them).
+    Also |C'| there, and its span (span: the one to try first)."""
     mid = 0.5 * (low + high_u)
-    span = find_span(knots, degree, coef.shape[0], mid, degree)
+    span = find_span(knots, degree, coef.shape[0], mid, span)
     c = point_d2(knots, coef, degree, span, mid)
     k_mid, s_mid = curvature(c[3], c[4], c[5], c[6], c[7], c[8])
     return (s_mid > zero_speed and math.isfinite(k_mid) and k_mid > kappa_floor
-            and k_mid > (1.0 + KAPPA_STEP_REL) * high_kappa)
+            and k_mid > (1.0 + KAPPA_STEP_REL) * high_kappa), s_mid, span
 
 
 @jit
@@ -216,7 +224,9 @@ def refine_where_kappa_jumps_or_turns(knots, coef, degree, u, kappa, speed, pts,
 
     Each round looks only at the intervals the last one made (the others' ends are unchanged):
     the nodes are kept in the order they are made, linked in the order of u by `after`, and
-    laid out in that order once at the end."""
+    laid out in that order once at the end. Returns the nodes' u, kappa, |C'| (M,), C, C', unit
+    tangent (M, 3), and |C'| at the middle of each node's interval to the next where the bump
+    check took it (NaN elsewhere): the arc length's quadrature starts there."""
     n_ctrl = coef.shape[0]
     most = REFINE_GROWTH_MAX * u.size
     all_u = np.empty(most)
@@ -225,6 +235,7 @@ def refine_where_kappa_jumps_or_turns(knots, coef, degree, u, kappa, speed, pts,
     all_p = np.empty((most, 3))
     all_d = np.empty((most, 3))
     all_t = np.empty((most, 3))
+    all_m = np.empty(most)  # |C'| at the middle of the interval a node starts, NaN: not known
     after = np.empty(most, dtype=np.int64)
     fresh = np.empty(most, dtype=np.int64)  # the first nodes of the intervals to look at
     split = np.empty(most, dtype=np.int64)
@@ -236,6 +247,7 @@ def refine_where_kappa_jumps_or_turns(knots, coef, degree, u, kappa, speed, pts,
             all_p[q, i] = pts[q, i]
             all_d[q, i] = d1[q, i]
             all_t[q, i] = tan[q, i]
+        all_m[q] = math.nan
         after[q] = q + 1
         fresh[q] = q
     size = u.size
@@ -252,11 +264,13 @@ def refine_where_kappa_jumps_or_turns(knots, coef, degree, u, kappa, speed, pts,
                 split[n_split] = q
                 n_split += 1
                 continue
-            if rounds < REFINE_ROUNDS and _hidden_bump(knots, coef, degree, all_u[q], all_u[r],
-                                                       high, kappa_floor, zero_speed):
-                split[n_split] = q
-                n_split += 1
-                continue
+            if rounds < REFINE_ROUNDS:
+                bump, all_m[q], span = _hidden_bump(knots, coef, degree, all_u[q], all_u[r], high,
+                                                    kappa_floor, zero_speed, span)
+                if bump:
+                    split[n_split] = q
+                    n_split += 1
+                    continue
             still_q = all_s[q] <= zero_speed
             still_r = all_s[r] <= zero_speed
             if still_q and still_r:
@@ -295,6 +309,8 @@ def refine_where_kappa_jumps_or_turns(knots, coef, degree, u, kappa, speed, pts,
             all_k[size] = k_mid if math.isfinite(k_mid) and s_mid > zero_speed else all_k[q]
             all_s[size] = s_mid
             node_values(c, all_p, all_d, all_t, size)
+            all_m[q] = math.nan
+            all_m[size] = math.nan
             after[q] = size
             after[size] = r
             fresh[n_fresh] = q
@@ -304,6 +320,7 @@ def refine_where_kappa_jumps_or_turns(knots, coef, degree, u, kappa, speed, pts,
     u_out = np.empty(size)
     k_out = np.empty(size)
     s_out = np.empty(size)
+    m_out = np.empty(size)
     p_out = np.empty((size, 3))
     d_out = np.empty((size, 3))
     t_out = np.empty((size, 3))
@@ -312,9 +329,10 @@ def refine_where_kappa_jumps_or_turns(knots, coef, degree, u, kappa, speed, pts,
         u_out[n] = all_u[q]
         k_out[n] = all_k[q]
         s_out[n] = all_s[q]
+        m_out[n] = all_m[q]
         for i in range(3):
             p_out[n, i] = all_p[q, i]
             d_out[n, i] = all_d[q, i]
             t_out[n, i] = all_t[q, i]
         q = after[q]
-    return u_out, k_out, s_out, p_out, d_out, t_out
+    return u_out, k_out, s_out, p_out, d_out, t_out, m_out

@@ -23,22 +23,19 @@ PROBE_REL = 1e-6  # of a span's width: where the way out of a zero of C' at a kn
 KAPPA_BOUNDED_REL = 0.25  # kappa beside a zero changing by more than this over 16x: unbounded
 
 
-@jit
 def find_corners(knots, coef, degree, breaks, floor_mm):
     """Step 3a: interior knots of multiplicity >= degree where the unit tangent jumps (not
-    where the curve has no length on one side: that is an end)."""
+    where the curve has no length on one side: that is an end). Not compiled (its kernels
+    are): it looks only at the knots of that multiplicity, which most curves have none of."""
     n_ctrl = coef.shape[0]
     eps = CORNER_PROBE_REL * (breaks[breaks.size - 1] - breaks[0])
     out = np.empty(max(breaks.size - 2, 0))
     n = 0
-    for b in range(1, breaks.size - 1):
+    inner = breaks[1:breaks.size - 1]
+    multiplicity = (np.searchsorted(knots, inner, side="right")
+                    - np.searchsorted(knots, inner, side="left"))
+    for b in np.flatnonzero(multiplicity >= degree) + 1:
         knot = breaks[b]
-        multiplicity = 0
-        for k in knots:
-            if k == knot:
-                multiplicity += 1
-        if multiplicity < degree:
-            continue
         _, _, _, h_before = _chord_from(knots, coef, degree, knot, -1.0,
                                         knot - breaks[b - 1], breaks[0], floor_mm)
         _, _, _, h_after = _chord_from(knots, coef, degree, knot, 1.0,

@@ -4,7 +4,7 @@ The grid has nodes at every knot and enough nodes inside each span that consecut
 at most `spacing_mm` apart; refined curvature maxima are nodes too. The planner checks its speed
 profile at these nodes ("limits everywhere"), so the spacing is tied to the step length v_m T.
 
-Building it, in order (`_sampled_nodes` and `_final_nodes`, compiled):
+Building it, in order (`_grid_nodes`, compiled steps; then `simpson_lengths`):
 1. Samples: per span, a node count from a 16-chord length estimate, evenly spaced in u; at a
    knot, the higher of kappa's two one-sided values.
 2. Curvature maxima: local maxima of kappa on the samples that stand out from their valleys,
@@ -37,9 +37,9 @@ Building it, in order (`_sampled_nodes` and `_final_nodes`, compiled):
    across which kappa jumps is halved, a few times over (geometry.sampling).
 5. Arc length by adaptive Simpson between consecutive nodes (geometry.arclength).
 Everything is evaluated one parameter at a time from the span polynomials (geometry.kernel), in
-numba's subset: the cost is the evaluations, not thousands of small array operations. Only the
-classification of candidate stops and near cusps runs as Python between the two kernels, and
-only on a curve that has such candidates (most have none).
+numba's subset: the cost is the evaluations, not thousands of small array operations. The
+classification of candidate stops and near cusps runs only on a curve that has such candidates
+(most have none).
 The grid keeps C and C' at its nodes, for the path model to read (planning.path_check).
 """
 
@@ -55,22 +55,17 @@ from nurbsfeed.geometry.arclength import simpson_lengths
 from nurbsfeed.geometry.nurbs import NurbsCurve
 from nurbsfeed.geometry.peaks import (
     boundary_maxima,
-    first_at_or_above,
-    holds_any,
     near_cusp_peaks,
     prominent_maxima,
-    refine_peak,
-    sorted_union,
+    refine_peaks,
 )
 from nurbsfeed.geometry.sampling import (
     ZERO_SPEED_REL,
-    fill_singular,
     merge,
     refine_where_kappa_jumps_or_turns,
     samples,
 )
 from nurbsfeed.geometry.stops import classify_stops, find_corners, stop_candidates
-from nurbsfeed.jit import jit
 
 # Simpson's tolerance per node interval, relative to the interval's length at the mean |C'|.
 # The accepted values carry the Richardson term, so they are far more accurate than this:
@@ -106,122 +101,75 @@ def polygon_length(points):
     return float(np.cumsum(lengths)[-1]) if lengths.size else 0.0
 
 
-@jit
-def _sampled_nodes(knots, coef, degree, breaks, spacing_mm, kappa_floor, floor_mm):
-    """Steps 1 to 3's search: the samples (u, kappa, |C'| (M,); C, C', unit tangent (M, 3);
-    the mean |C'|), the samples at prominent maxima of kappa (P,) and the refined maxima there
-    (P,), the corners (C,), and the candidate stops (`stop_candidates`)."""
+def _holding(sorted_u: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """Whether sorted_u (K,) has a value in [low, high], for each (P,) pair."""
+    if sorted_u.size == 0:
+        return np.zeros(low.size, dtype=bool)
+    q = np.searchsorted(sorted_u, low)
+    return (q < sorted_u.size) & (sorted_u[np.minimum(q, sorted_u.size - 1)] <= high)
+
+
+def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, floor_mm):
+    """Steps 1-4: nodes u, kappa, |C'| (M,), C and C' at them (M, 3), |C'| at the middle of
+    each node's interval where the refinement took it (M,; NaN elsewhere), refined peak
+    parameters (P,), stops (Q,) with the cosine of their turn (Q,), and the mean |C'| over the
+    samples (the arc length tolerance's scale).
+
+    The steps are compiled and each is called once from here (a compiled driver would compile
+    every step's code a second time, into itself: seconds of the first run); the sorting and
+    masking of a few values between them is numpy's, and the classification of candidate stops
+    runs only on a curve that has some."""
     u, kappa, speed, pts, d1, tan, mean_speed = samples(knots, coef, degree, breaks, spacing_mm)
     zero_speed = ZERO_SPEED_REL * mean_speed
-    for q in range(u.size):
-        if speed[q] <= zero_speed:
-            kappa[q] = math.nan
-    fill_singular(kappa)
     idx = prominent_maxima(kappa)
-    peak_u = np.empty(idx.size)
-    for k in range(idx.size):
-        refined_u, refined_kappa = refine_peak(knots, coef, degree, u[idx[k] - 1],
-                                               u[idx[k] + 1], kappa_floor)
-        peak_u[k] = refined_u if refined_kappa > kappa[idx[k]] else u[idx[k]]
+    refined_u, refined_kappa = refine_peaks(knots, coef, degree, u[idx - 1], u[idx + 1],
+                                            kappa_floor)
+    peak_u = np.where(refined_kappa > kappa[idx], refined_u, u[idx])
+    # kappa grows without bound into a cusp, so its "maximum" is the refinement's bracket end:
+    # a peak whose bracket holds a stop (below) adds nothing, the motion rests there anyway
     corner_u = find_corners(knots, coef, degree, breaks, floor_mm)
     found_u, minima, turns, back = stop_candidates(knots, coef, degree, breaks, u, speed, pts,
                                                    tan, zero_speed, mean_speed, floor_mm)
-    return (u, kappa, speed, pts, d1, tan, mean_speed, idx, peak_u, corner_u, found_u, minima,
-            turns, back)
-
-
-@jit
-def _final_nodes(knots, coef, degree, breaks, u, kappa, speed, pts, d1, tan, mean_speed, idx,
-                 peak_u, corner_u, zero_u, zero_cos, needle_u, extra_u, kappa_floor, floor_mm):
-    """Steps 2 to 5 from the samples and what `_sampled_nodes` and the stops' classification
-    found there: the nodes u, s, kappa (M,), the peak and stop nodes (P,), (Q,) and the stops'
-    cosines (Q,), C and C' at the nodes (M, 3). Where the arc length does not converge s is
-    NaN from there on (the caller refuses the curve)."""
-    zero_speed = ZERO_SPEED_REL * mean_speed
-    # the stops in order of u, corners first among equals (their cosine 0: a stop's turn)
-    stop_u = np.empty(corner_u.size + zero_u.size)
-    stop_cos = np.empty(stop_u.size)
-    for i in range(stop_u.size):
-        here = corner_u[i] if i < corner_u.size else zero_u[i - corner_u.size]
-        here_cos = 0.0 if i < corner_u.size else zero_cos[i - corner_u.size]
-        j = i - 1
-        while j >= 0 and stop_u[j] > here:
-            stop_u[j + 1] = stop_u[j]
-            stop_cos[j + 1] = stop_cos[j]
-            j -= 1
-        stop_u[j + 1] = here
-        stop_cos[j + 1] = here_cos
-    # kappa grows without bound into a cusp, so its "maximum" is the refinement's bracket end:
-    # a peak whose bracket holds a stop adds nothing, the motion rests there anyway
-    kept = np.empty(peak_u.size)
-    n_kept = 0
-    for k in range(idx.size):
-        if not holds_any(stop_u, u[idx[k] - 1], u[idx[k] + 1]):
-            kept[n_kept] = peak_u[k]
-            n_kept += 1
-    peaks = sorted_union(kept[:n_kept], needle_u)
-    beside_u = boundary_maxima(knots, coef, degree, breaks, u, peaks, stop_u)
+    stop_u, stop_cos = corner_u, np.zeros(corner_u.size)
+    if found_u.size or minima.size or turns.size or back.shape[0]:
+        zero_u, zero_cos, near_u = classify_stops(knots, coef, degree, breaks, u, tan,
+                                                  zero_speed, mean_speed, floor_mm, kappa_floor,
+                                                  found_u, minima, turns, back)
+        stop_u = np.concatenate((corner_u, zero_u))
+        stop_cos = np.concatenate((stop_cos, zero_cos))
+        order = np.argsort(stop_u, kind="stable")
+        stop_u = stop_u[order]
+        stop_cos = stop_cos[order]
+        peak_u = np.concatenate((peak_u[~_holding(stop_u, u[idx - 1], u[idx + 1])],
+                                 near_cusp_peaks(knots, coef, degree, u, kappa, near_u,
+                                                 kappa_floor)))
+    elif stop_u.size:
+        peak_u = peak_u[~_holding(stop_u, u[idx - 1], u[idx + 1])]
+    peak_u = np.sort(peak_u)
+    beside_u = boundary_maxima(knots, coef, degree, breaks, u, peak_u, stop_u)
     if beside_u.size:
-        peaks = sorted_union(peaks, beside_u)
-    extra = sorted_union(sorted_union(peaks, stop_u), extra_u)
+        peak_u = np.sort(np.concatenate((peak_u, beside_u)))
+    extra = np.sort(np.concatenate((peak_u, stop_u, extra_u)))
     u, kappa, speed, pts, d1, tan = merge(knots, coef, degree, u, kappa, speed, pts, d1, tan,
                                           extra, zero_speed)
-    fill_singular(kappa)
-    u, kappa, speed, pts, d1, tan = refine_where_kappa_jumps_or_turns(
+    u, kappa, speed, pts, d1, tan, mid_speed = refine_where_kappa_jumps_or_turns(
         knots, coef, degree, u, kappa, speed, pts, d1, tan, kappa_floor, zero_speed, floor_mm)
     # a spike of kappa narrower than the samples shows only in the refined grid: its maxima
     # at or above kappa_floor that no peak's bracket holds are peaks too (refined likewise)
     idx = prominent_maxima(kappa)
-    more = np.empty(idx.size)
-    n_more = 0
-    for k in range(idx.size):
-        low, high = u[idx[k] - 1], u[idx[k] + 1]
-        if kappa[idx[k]] < kappa_floor:
-            continue
-        if holds_any(peaks, low, high) or holds_any(stop_u, low, high):
-            continue
-        refined_u, refined_kappa = refine_peak(knots, coef, degree, low, high, kappa_floor)
-        more[n_more] = refined_u if refined_kappa > kappa[idx[k]] else u[idx[k]]
-        n_more += 1
-    if n_more:
-        added = sorted_union(more[:n_more], np.empty(0))
+    low, high = u[idx - 1], u[idx + 1]
+    new = (kappa[idx] >= kappa_floor) & ~_holding(peak_u, low, high) & ~_holding(stop_u, low,
+                                                                                 high)
+    if new.any():
+        idx = idx[new]
+        refined_u, refined_kappa = refine_peaks(knots, coef, degree, low[new], high[new],
+                                                kappa_floor)
+        added = np.sort(np.where(refined_kappa > kappa[idx], refined_u, u[idx]))
         u, kappa, speed, pts, d1, tan = merge(knots, coef, degree, u, kappa, speed, pts, d1,
                                               tan, added, zero_speed)
-        fill_singular(kappa)
-        peaks = sorted_union(peaks, added)
-    s = simpson_lengths(knots, coef, degree, u, speed, ARC_REL_TOL * (mean_speed + 1e-300))
-    # two stops on one node (a corner knot where C' also vanishes) are one: the sharper turn
-    stop_index = np.empty(stop_u.size, dtype=np.int64)
-    index_cos = np.empty(stop_u.size)
-    n_stops = 0
-    for i in range(stop_u.size):
-        q = first_at_or_above(u, stop_u[i])
-        if n_stops > 0 and stop_index[n_stops - 1] == q:
-            if stop_cos[i] < index_cos[n_stops - 1] or stop_cos[i] != stop_cos[i]:
-                index_cos[n_stops - 1] = stop_cos[i]
-            continue
-        stop_index[n_stops] = q
-        index_cos[n_stops] = stop_cos[i]
-        n_stops += 1
-    # stops with no length between them (a span whose control points are all equal) are one
-    # place: the first stands, the others become plain nodes with the kappa that follows them
-    same = np.empty(n_stops, dtype=np.bool_)
-    for i in range(n_stops):
-        same[i] = i > 0 and s[stop_index[i]] - s[stop_index[i - 1]] <= floor_mm
-    for i in range(n_stops - 1, 0, -1):
-        if same[i]:
-            kappa[stop_index[i]] = kappa[stop_index[i] + 1]
-    n_kept = 0
-    for i in range(n_stops):
-        if not same[i]:
-            stop_index[n_kept] = stop_index[i]
-            index_cos[n_kept] = index_cos[i]
-            n_kept += 1
-            kappa[stop_index[i]] = math.inf
-    peak_index = np.empty(peaks.size, dtype=np.int64)
-    for k in range(peaks.size):
-        peak_index[k] = first_at_or_above(u, peaks[k])
-    return u, s, kappa, peak_index, stop_index[:n_kept], index_cos[:n_kept], pts, d1
+        mid_speed = np.full(u.size, np.nan)  # (the new nodes split intervals: none known)
+        peak_u = np.sort(np.concatenate((peak_u, added)))
+    return u, kappa, speed, pts, d1, mid_speed, peak_u, stop_u, stop_cos, mean_speed
 
 
 def _zero_length_grid(curve: NurbsCurve, extra_u: np.ndarray) -> Grid:
@@ -249,27 +197,32 @@ def build_grid(curve: NurbsCurve, spacing_mm: float, extra_u: np.ndarray = np.em
     """
     if curve.is_degenerate:
         return _zero_length_grid(curve, extra_u)
-    knots, coef, degree, breaks = curve.knots, curve.span_polynomials, curve.degree, \
-        curve.span_breaks
+    knots, coef, degree = curve.knots, curve.span_polynomials, curve.degree
     floor_mm = TANGENT_CHORD_REL * polygon_length(curve.points)
-    kappa_floor = float(kappa_floor)
-    (u, kappa, speed, pts, d1, tan, mean_speed, idx, peak_u, corner_u, found_u, minima, turns,
-     back) = _sampled_nodes(knots, coef, degree, breaks, float(spacing_mm), kappa_floor,
-                            floor_mm)
-    zero_u = zero_cos = needle_u = np.empty(0)
-    if found_u.size or minima.size or turns.size or back.shape[0]:
-        zero_u, zero_cos, near_u = classify_stops(
-            knots, coef, degree, breaks, u, tan, ZERO_SPEED_REL * mean_speed, mean_speed,
-            floor_mm, kappa_floor, found_u, minima, turns, back)
-        needle_u = near_cusp_peaks(knots, coef, degree, u, kappa, near_u, kappa_floor)
-    u, s, kappa, peak_index, stop_index, stop_cos, points, d1 = _final_nodes(
-        knots, coef, degree, breaks, u, kappa, speed, pts, d1, tan, mean_speed, idx, peak_u,
-        corner_u, zero_u, zero_cos, needle_u, np.array(extra_u, dtype=float), kappa_floor,
-        floor_mm)
+    u, kappa, speed, points, d1, mid_speed, peak_u, stop_u, stop_cos, mean_speed = _grid_nodes(
+        knots, coef, degree, curve.span_breaks, float(spacing_mm),
+        np.array(extra_u, dtype=float), float(kappa_floor), floor_mm)
+    # two stops on one node (a corner knot where C' also vanishes) are one: the sharper turn
+    stop_index = np.searchsorted(u, stop_u)
+    if stop_index.size > 1:
+        stop_index, first = np.unique(stop_index, return_index=True)
+        stop_cos = np.minimum.reduceat(stop_cos, first)
+    peak_index = np.searchsorted(u, peak_u)
+    s = simpson_lengths(knots, coef, degree, u, speed, mid_speed,
+                        ARC_REL_TOL * (mean_speed + 1e-300))
     if not math.isfinite(s[-1]):
         q = int(np.argmin(np.isfinite(s)))
         raise CurveError(f"arc length does not converge between u = {curve.input_u(u[q - 1]):.9g}"
                          f" and {curve.input_u(u[q]):.9g} (|C'| there is rounding noise?)")
+    # stops with no length between them (a span whose control points are all equal) are one
+    # place: the first stands, the others become plain nodes with the kappa that follows them
+    same = np.flatnonzero(np.diff(s[stop_index]) <= floor_mm) + 1 if stop_index.size > 1 else ()
+    if len(same):
+        for n in stop_index[same][::-1]:
+            kappa[n] = kappa[n + 1]
+        stop_index = np.delete(stop_index, same)
+        stop_cos = np.delete(stop_cos, same)
+    kappa[stop_index] = np.inf
     for a in (u, s, kappa, peak_index, stop_index, stop_cos, points, d1):
         a.setflags(write=False)
     return Grid(u, s, kappa, peak_index, stop_index, stop_cos, points, d1)

@@ -81,8 +81,8 @@ def most(r, x):
 
 @jit
 def chord_acc_limit(k, period_s, chord_mm, normal_acc_mm_s2):
-    """The chord and normal acceleration terms of `speed_limit` at one kappa k: inf where k is
-    not above 0."""
+    """The chord and normal acceleration terms of `speed_limit` at one kappa k, as it computes
+    them: inf where k is not above 0."""
     if not k > 0.0:
         return math.inf
     if k * chord_mm < 1.0:
@@ -92,29 +92,22 @@ def chord_acc_limit(k, period_s, chord_mm, normal_acc_mm_s2):
     return least(chord, math.sqrt(normal_acc_mm_s2 / k))
 
 
-@jit
-def _speed_limits(kappa, feed_mm_s, lims, out):
-    """`speed_limit` but its paper jerk term, into out (N,): kappa, feed_mm_s (N,) (the lower
-    of the programmed and the machine's)."""
-    for i in range(kappa.size):
-        out[i] = least(chord_acc_limit(kappa[i], lims[L_PERIOD], lims[L_CHORD],
-                                       lims[L_NORMAL_ACC]), feed_mm_s[i])
-
-
 def speed_limit(kappa_1_mm: np.ndarray, lim: Limits, feed_mm_s: np.ndarray | float) -> np.ndarray:
     """Pointwise limit v(kappa) (Eq. 15 with the sign of Eq. 14 corrected): (N,) -> (N,).
 
     min(v_m, (2/T) sqrt(2 rho delta - delta^2), sqrt(A_n rho), cbrt(J_n rho^2)) with rho = 1/kappa
     (the last under the paper's jerk model only).
     The chord term saturates at 2 rho / T once delta >= rho (the chord is then a diameter).
-    Written in kappa so that kappa = 0 gives the feed cap without dividing by zero. The cube
-    root is numpy's (a compiled one rounds differently), taken after the kernel.
+    Written in kappa so that kappa = 0 gives the feed cap without dividing by zero. (The
+    compiled `chord_acc_limit` computes its first terms alike, operation for operation.)
     """
-    k = np.array(kappa_1_mm, dtype=float)  # a copy: the kernel sees one array type
-    feed = np.array(np.broadcast_to(np.minimum(lim.feed_mm_s, feed_mm_s), k.shape), dtype=float)
-    v = np.empty(k.shape)
-    _speed_limits(k.ravel(), feed.ravel(), limit_values(lim), v.ravel())
-    if lim.jerk_model == "paper":  # the path model's jerk limits: planning.path_model
-        with np.errstate(divide="ignore"):
-            v = np.minimum(v, np.where(k > 0.0, np.cbrt(lim.normal_jerk_mm_s3 / (k * k)), np.inf))
-    return v
+    k = np.asarray(kappa_1_mm, dtype=float)
+    t, d = lim.period_s, lim.chord_mm
+    with np.errstate(divide="ignore", invalid="ignore"):
+        chord = np.where(k * d < 1.0, (2.0 / t) * np.sqrt(d * (2.0 - k * d) / k), 2.0 / (k * t))
+        acc = np.sqrt(lim.normal_acc_mm_s2 / k)
+        v = np.minimum(chord, acc)
+        if lim.jerk_model == "paper":  # the path model's jerk limits: planning.path_model
+            v = np.minimum(v, np.cbrt(lim.normal_jerk_mm_s3 / (k * k)))
+    v = np.where(k > 0.0, v, np.inf)
+    return np.minimum(v, np.minimum(lim.feed_mm_s, feed_mm_s))

@@ -15,7 +15,7 @@ import numpy as np
 from nurbsfeed.geometry.arclength import gauss_lengths
 from nurbsfeed.geometry.kernel import find_span, point_d3
 from nurbsfeed.geometry.nurbs import NurbsCurve
-from nurbsfeed.geometry.peaks import first_above, first_at_or_above
+from nurbsfeed.geometry.peaks import first_above
 from nurbsfeed.jit import jit
 from nurbsfeed.planning.grid import ZERO_SPEED_REL, Grid
 from nurbsfeed.planning.limits import (
@@ -38,7 +38,7 @@ from nurbsfeed.planning.path_model import (
 )
 from nurbsfeed.planning.timelaw import TimeLaw
 
-# the path model's own minima of the limit that become key points (`_binding_minima`)
+# the path model's own minima of the limit that become key points (`path_limit`)
 MINIMUM_WINDOW = 3  # nodes on each side
 MINIMUM_RISE = 2.0  # the rise of the limit within them, on both sides (or to a neighbour)
 
@@ -94,7 +94,13 @@ def path_limit(curve: NurbsCurve, grid: Grid, lim: Limits, raw_limit: np.ndarray
     static_limit`, the speed at knots where kappa N jumps, and caps (M,) from `path_excess`),
     and the nodes that become key points (the law passes them at zero acceleration, at a speed
     no higher than their limit): the knots where that jump sets the limit, and the limit's own
-    minima (`_binding_minima`).
+    minima. The paper's limit is lowest at curvature peaks, which are key points; the path
+    model's has lows of its own (kappa' and the per-axis terms), and one between two key points
+    left the fix rounds to cap the whole segment at it, or to slow the whole curve: a curve
+    reached a step from 24.7 to 0.55 mm/s at 3.4 mm/s (kappa' jumps at a cubic's knots with its
+    third derivative) and was slowed 6.3 times (13 s for the paper model's 1.6 s). Shallower
+    lows are left to the fix rounds and the shoulders: a key point holds the acceleration at
+    zero, and one at every 2 % low made the dense test curves up to 20 % slower.
 
     Where C' = 0 (a removable zero the grid passes at speed) the frame is rounding noise
     (kappa 2e30 at a knot of |C'| 5e-14 once planned a curve at 3e20 s): a node there takes the
@@ -160,49 +166,28 @@ def _limit_and_keys(knots, coef, degree, breaks, u, static, raw_limit, speed, ze
     key = np.empty(size, dtype=np.bool_)
     for i in range(size):
         key[i] = False
-    for b in range(1, breaks.size - 1):
-        q = first_at_or_above(u, breaks[b])
+    q = 0
+    for b in range(1, breaks.size - 1):  # the knots on nodes (both ascending)
+        while q < size and u[q] < breaks[b]:
+            q += 1
         if q < size and u[q] == breaks[b]:
             jx, jy, jz = kappa_n_jump(knots, coef, degree, breaks[b], zero_speed)
             at_jump = jump_speed(jx, jy, jz, lims)
             if at_jump < limit[q]:
                 limit[q] = at_jump
                 key[q] = True
-    _binding_minima(limit, raw_limit, key)
-    n_keys = 0
-    for i in range(size):
-        n_keys += key[i]
-    keys = np.empty(n_keys, dtype=np.int64)
-    n_keys = 0
-    for i in range(size):
-        if key[i]:
-            keys[n_keys] = i
-            n_keys += 1
-    return keys
-
-
-@jit
-def _binding_minima(limit, raw_limit, key):
-    """Marks in key (M,) the nodes where the path model's own terms set the limit (below the
-    paper's raw limit) and it is low: the lowest of MINIMUM_WINDOW nodes on each side (stops,
-    limit 0, aside), with the limit rising to MINIMUM_RISE times it on both sides within them
-    (a minimum), or the low side of a step (a neighbour's limit MINIMUM_RISE times it: kappa'
-    jumps at a cubic's knots with its third derivative). The ends are never marked here. The
-    paper's limit is lowest at curvature peaks, which are key points; the path model's has lows
-    of its own (kappa' and the per-axis terms), and one between two key points left the fix
-    rounds to cap the whole segment at it, or to slow the whole curve: a curve reached a step
-    from 24.7 to 0.55 mm/s at 3.4 mm/s and was slowed 6.3 times (13 s for the paper model's
-    1.6 s). Shallower lows are left to the fix rounds and the shoulders: a key point holds the
-    acceleration at zero, and one at every 2 % low made the dense test curves up to 20 %
-    slower."""
+    # the path model's own lows (`path_limit`): a node where its terms set the limit (below the
+    # paper's raw limit), the lowest of MINIMUM_WINDOW nodes on each side (stops, limit 0,
+    # aside) with the limit rising to MINIMUM_RISE times it on both sides within them, or the
+    # low side of a step (a neighbour MINIMUM_RISE times it); never an end
     w = MINIMUM_WINDOW
-    last = limit.size - 1
+    last = size - 1
     for i in range(1, last):
         here = limit[i]
         if not (here < raw_limit[i] and here > 0.0 and math.isfinite(here)):
             continue
         rise = MINIMUM_RISE * here
-        if limit[i - 1] >= rise or limit[i + 1] >= rise:  # a step
+        if limit[i - 1] >= rise or limit[i + 1] >= rise:
             key[i] = True
             continue
         # the windows beside the node, their ends held at the curve's ends
@@ -218,6 +203,16 @@ def _binding_minima(limit, raw_limit, key):
             right_max = most(right_max, after)
         if left_min > here and right_min >= here and left_max >= rise and right_max >= rise:
             key[i] = True
+    n_keys = 0
+    for i in range(size):
+        n_keys += key[i]
+    keys = np.empty(n_keys, dtype=np.int64)
+    n_keys = 0
+    for i in range(size):
+        if key[i]:
+            keys[n_keys] = i
+            n_keys += 1
+    return keys
 
 
 PATH_SAMPLES_PER_PERIOD = 2  # the path model's final check samples the law this densely

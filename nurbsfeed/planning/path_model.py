@@ -251,27 +251,28 @@ def _ratio_kernel(kappa: np.ndarray, dkappa_ds: np.ndarray, torsion: np.ndarray,
 
 
 @jit
-def _kappa_n(x1, y1, z1, x2, y2, z2):
-    """kappa N = (C'' |C'|^2 - (C' . C'') C') / |C'|^4 (0 where C' = 0), and |C'|."""
-    sp2 = dot3(x1, y1, z1, x1, y1, z1)
-    if not sp2 > 0.0:
-        return 0.0, 0.0, 0.0, math.sqrt(sp2)
-    along = dot3(x1, y1, z1, x2, y2, z2)
-    square = sp2 * sp2
-    return ((x2 * sp2 - along * x1) / square, (y2 * sp2 - along * y1) / square,
-            (z2 * sp2 - along * z1) / square, math.sqrt(sp2))
-
-
-@jit
 def kappa_n_jump(knots, coef, degree, u_break, zero_speed):
     """The jump D (3 floats) of kappa N at the interior knot u_break, 0 where it does not jump
     (`kappa_n_jumps`)."""
     n_ctrl = coef.shape[0]
-    c = point_d3(knots, coef, degree, find_span(knots, degree, n_ctrl, u_break, degree), u_break)
-    rx, ry, rz, right_speed = _kappa_n(c[3], c[4], c[5], c[6], c[7], c[8])
-    before = math.nextafter(u_break, -math.inf)
-    c = point_d3(knots, coef, degree, find_span(knots, degree, n_ctrl, before, degree), before)
-    lx, ly, lz, left_speed = _kappa_n(c[3], c[4], c[5], c[6], c[7], c[8])
+    rx = ry = rz = right_speed = 0.0
+    lx = ly = lz = left_speed = 0.0
+    for side in range(2):  # the span after the knot, then the one before it
+        at = u_break if side == 0 else math.nextafter(u_break, -math.inf)
+        c = point_d3(knots, coef, degree, find_span(knots, degree, n_ctrl, at, degree), at)
+        # kappa N = (C'' |C'|^2 - (C' . C'') C') / |C'|^4, 0 where C' = 0
+        sp2 = dot3(c[3], c[4], c[5], c[3], c[4], c[5])
+        kx = ky = kz = 0.0
+        if sp2 > 0.0:
+            along = dot3(c[3], c[4], c[5], c[6], c[7], c[8])
+            square = sp2 * sp2
+            kx = (c[6] * sp2 - along * c[3]) / square
+            ky = (c[7] * sp2 - along * c[4]) / square
+            kz = (c[8] * sp2 - along * c[5]) / square
+        if side == 0:
+            rx, ry, rz, right_speed = kx, ky, kz, math.sqrt(sp2)
+        else:
+            lx, ly, lz, left_speed = kx, ky, kz, math.sqrt(sp2)
     framed = 1.0 if least(left_speed, right_speed) > zero_speed else 0.0
     jx, jy, jz = (rx - lx) * framed, (ry - ly) * framed, (rz - lz) * framed
     size = math.sqrt(dot3(jx, jy, jz, jx, jy, jz))
