@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -91,6 +92,14 @@ class Grid:
     @property
     def length_mm(self) -> float:
         return float(self.s_mm[-1])
+
+    @cached_property
+    def speed_mm(self) -> np.ndarray:
+        """|C'| at the nodes (M,), read-only, as `NurbsCurve.speed` gives it (numpy's sum of
+        the three squares, which the grid's own |C'| need not match to the last bit)."""
+        speed = np.sqrt(np.einsum("...i,...i->...", self.d1_mm, self.d1_mm))
+        speed.setflags(write=False)
+        return speed
 
 
 def polygon_length(points):

@@ -27,7 +27,6 @@ from nurbsfeed.planning.limits import (
     most,
 )
 from nurbsfeed.planning.path_model import (
-    dot3,
     frame,
     frames,
     jump_speed,
@@ -108,10 +107,10 @@ def path_limit(curve: NurbsCurve, grid: Grid, lim: Limits, raw_limit: np.ndarray
     knots, coef, degree = curve.knots, curve.span_polynomials, curve.degree
     lims = limit_values(lim)
     low = np.empty(grid.u.size)
-    roots = np.empty((grid.u.size, 5))
-    speed = np.empty(grid.u.size)
-    _node_static_terms(knots, coef, degree, grid.u, lims, low, roots, speed)
+    roots = np.empty((5, grid.u.size))
+    _node_static_terms(knots, coef, degree, grid.u, lims, low, roots)
     static = with_roots(low, roots)
+    speed = grid.speed_mm
     if caps is not None:
         static = np.minimum(static, caps)
     limit = np.empty(grid.u.size)
@@ -122,17 +121,15 @@ def path_limit(curve: NurbsCurve, grid: Grid, lim: Limits, raw_limit: np.ndarray
 
 
 @jit
-def _node_static_terms(knots, coef, degree, u, lims, low, roots, speed):
-    """`path_model.static_terms` at every node into low (M,) and roots (M, 5), and |C'| into
-    speed (M,), as `NurbsCurve.speed` gives it."""
+def _node_static_terms(knots, coef, degree, u, lims, low, roots):
+    """`path_model.static_terms` at every node into low (M,) and roots (5, M)."""
     span = degree
     for i in range(u.size):
         span = find_span(knots, degree, coef.shape[0], u[i], span)
         c = point_d3(knots, coef, degree, span, u[i])
         f = frame(c[3], c[4], c[5], c[6], c[7], c[8], c[9], c[10], c[11])
         low[i] = static_terms(lims, f[0], f[1], f[2], f[3], f[4], f[5], f[6], f[7], f[8], f[9],
-                              f[10], f[11], roots[i])
-        speed[i] = math.sqrt(dot3(c[3], c[4], c[5], c[3], c[4], c[5]))
+                              f[10], f[11], roots, i)
 
 
 @jit
@@ -231,7 +228,7 @@ def arc_parameters(curve: NurbsCurve, grid: Grid, s_mm: np.ndarray) -> np.ndarra
     u = np.empty(s_at.size)
     interval = np.empty(s_at.size, dtype=np.int64)
     is_uneven = np.empty(s_at.size, dtype=np.bool_)
-    if not _linear_parameters(grid.s_mm, grid.u, grid.d1_mm, s_at, u, interval, is_uneven):
+    if not _linear_parameters(grid.s_mm, grid.u, grid.speed_mm, s_at, u, interval, is_uneven):
         return u
     uneven = np.flatnonzero(is_uneven)
     first = interval[uneven]
@@ -249,11 +246,11 @@ def arc_parameters(curve: NurbsCurve, grid: Grid, s_mm: np.ndarray) -> np.ndarra
 
 
 @jit
-def _linear_parameters(s_nodes, u_nodes, d1, s_mm, u, interval, uneven):
+def _linear_parameters(s_nodes, u_nodes, speed, s_mm, u, interval, uneven):
     """`arc_parameters`' linear part: u at s_mm (N,) by np.interp's arithmetic on the nodes
     (s_nodes, u_nodes (M,)), each one's interval (its first node, within 0 .. M - 2) and whether
-    |C'| (from C' at the nodes, d1 (M, 3), as `NurbsCurve.speed` gives it) changes across it by
-    more than UNEVEN_SPEED; into u, interval, uneven (N,). Returns whether any is uneven."""
+    |C'| (speed (M,) at the nodes) changes across it by more than UNEVEN_SPEED; into u,
+    interval, uneven (N,). Returns whether any is uneven."""
     size = s_nodes.size
     j = 0  # the last node at or below the last s: the next one's search starts there
     any_uneven = False
@@ -278,10 +275,8 @@ def _linear_parameters(s_nodes, u_nodes, d1, s_mm, u, interval, uneven):
                     u[i] = u_nodes[j]
         q = min(max(j, 0), size - 2)
         interval[i] = q
-        here = math.sqrt(dot3(d1[q, 0], d1[q, 1], d1[q, 2], d1[q, 0], d1[q, 1], d1[q, 2]))
-        after = math.sqrt(dot3(d1[q + 1, 0], d1[q + 1, 1], d1[q + 1, 2], d1[q + 1, 0],
-                               d1[q + 1, 1], d1[q + 1, 2]))
-        uneven[i] = most(here, after) > UNEVEN_SPEED * least(here, after)
+        uneven[i] = (most(speed[q], speed[q + 1])
+                     > UNEVEN_SPEED * least(speed[q], speed[q + 1]))
         any_uneven = any_uneven or uneven[i]
     return any_uneven
 

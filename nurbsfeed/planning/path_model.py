@@ -156,14 +156,15 @@ def scurve_limits(lim: Limits, moving_axes: np.ndarray) -> tuple[float, float]:
 
 
 @jit
-def static_terms(lims, kappa, dkappa_ds, torsion, tx, ty, tz, nx, ny, nz, bx, by, bz, roots):
+def static_terms(lims, kappa, dkappa_ds, torsion, tx, ty, tz, nx, ny, nz, bx, by, bz, roots,
+                 i):
     """`static_limit` at one point, lims its `limit_values`, but for its cube roots: the lowest
-    of its other terms, and into roots (5,) what its five cube roots are taken of (inf where a
-    term sets no limit): J_t / kappa^2, J_n / |kappa' N + kappa tau B| and per axis
-    J_x / |(-kappa^2 T + kappa' N + kappa tau B)_x|."""
-    roots[0] = lims[L_JERK] / (kappa * kappa) if kappa * kappa > 0.0 else math.inf
+    of its other terms, and into roots[:, i] (roots (5, M)) what its five cube roots are taken
+    of (inf where a term sets no limit): J_t / kappa^2, J_n / |kappa' N + kappa tau B| and per
+    axis J_x / |(-kappa^2 T + kappa' N + kappa tau B)_x|."""
+    roots[0, i] = lims[L_JERK] / (kappa * kappa) if kappa * kappa > 0.0 else math.inf
     normal = np.hypot(dkappa_ds, kappa * torsion)
-    roots[1] = lims[L_NORMAL_JERK] / normal if normal > 0.0 else math.inf
+    roots[1, i] = lims[L_NORMAL_JERK] / normal if normal > 0.0 else math.inf
     v = math.inf
     for x in range(3):
         t_x = tx if x == 0 else (ty if x == 1 else tz)
@@ -174,23 +175,24 @@ def static_terms(lims, kappa, dkappa_ds, torsion, tx, ty, tz, nx, ny, nz, bx, by
         across = kappa * abs(n_x)
         v = least(v, math.sqrt(lims[L_AXIS_ACC + x] / across) if across > 0.0 else math.inf)
         jerk = abs((-(kappa * kappa) * t_x + dkappa_ds * n_x) + (kappa * torsion) * b_x)
-        roots[2 + x] = lims[L_AXIS_JERK + x] / jerk if jerk > 0.0 else math.inf
+        roots[2 + x, i] = lims[L_AXIS_JERK + x] / jerk if jerk > 0.0 else math.inf
     return v
 
 
 @jit
 def _static_terms_of(lims, kappa, dkappa_ds, torsion, tangent, normal, binormal, low, roots):
-    """`static_terms` of every point of a `Frames` into low (M,) and roots (M, 5)."""
+    """`static_terms` of every point of a `Frames` into low (M,) and roots (5, M)."""
     for i in range(kappa.size):
         low[i] = static_terms(lims, kappa[i], dkappa_ds[i], torsion[i], tangent[i, 0],
                               tangent[i, 1], tangent[i, 2], normal[i, 0], normal[i, 1],
                               normal[i, 2], binormal[i, 0], binormal[i, 1], binormal[i, 2],
-                              roots[i])
+                              roots, i)
 
 
 def with_roots(low: np.ndarray, roots: np.ndarray) -> np.ndarray:
-    """The static limit (M,) from `static_terms`' low (M,) and roots (M, 5)."""
-    return np.minimum(low, np.cbrt(roots).min(axis=1))
+    """The static limit (M,) from `static_terms`' low (M,) and roots (5, M) (five rows: a
+    minimum across them is quick, one across a short last axis is not)."""
+    return np.minimum(low, np.cbrt(roots).min(axis=0))
 
 
 def static_limit(f: Frames, lim: Limits) -> np.ndarray:
@@ -200,7 +202,7 @@ def static_limit(f: Frames, lim: Limits) -> np.ndarray:
     kappa v^2 |N_x| <= A_x, |(-kappa^2 T + kappa' N + kappa tau B)_x| v^3 <= J_x. Normal
     acceleration and the chord limit are `limits.speed_limit`'s."""
     low = np.empty(f.kappa.size)
-    roots = np.empty((f.kappa.size, 5))
+    roots = np.empty((5, f.kappa.size))
     kappa, dkappa_ds, torsion, tangent, normal, binormal = (
         np.array(a, dtype=float) for a in (f.kappa, f.dkappa_ds, f.torsion, f.tangent, f.normal,
                                            f.binormal))
