@@ -128,8 +128,14 @@ def _brent_max(knots, coef, degree, span, a, b, x, kappa_x, tol):
 
 
 @jit
-def refine_peaks(knots, coef, degree, lows, highs, kappa_floor):
-    """Step 2b: the maximum of kappa in each bracket [lows[k], highs[k]] (P,): u, kappa (P,).
+def refined_maxima(knots, coef, degree, node_u, node_kappa, held_u, stop_u, kappa_floor,
+                   at_least):
+    """Step 2b: the curvature maxima of the nodes node_u, node_kappa (M,), refined (P,): each
+    prominent maximum (`prominent_maxima`) with kappa at least at_least whose bracket, its
+    neighbouring nodes, holds no value of held_u nor of stop_u (both sorted; kappa grows
+    without bound into a cusp, so its "maximum" is the bracket's end: the motion rests at a
+    stop anyway), as the maximum of kappa in its bracket, or the node itself where that is no
+    higher.
 
     kappa is smooth inside a span; at a knot it may have a kink, or a jump where the curve is
     only C1 there. First, ZOOM_SAMPLES evenly spaced samples, and every knot inside with the
@@ -139,15 +145,19 @@ def refine_peaks(knots, coef, degree, lows, highs, kappa_floor):
     the knots inside it, which are candidates from both sides; a piece whose inside holds a
     point above both its ends (the best sample, or a probe just inside a knot end where kappa
     rises into the piece) is searched by `_brent_max` on its own span's polynomial, and on any
-    other piece the maximum is at an end. All brackets in one call: the grid has dozens.
+    other piece the maximum is at an end.
     """
     n_ctrl = coef.shape[0]
     last = ZOOM_SAMPLES - 1
-    peak_u = np.empty(lows.size)
-    peak_k = np.empty(lows.size)
-    for p in range(lows.size):
-        low = lows[p]
-        high = highs[p]
+    at = prominent_maxima(node_kappa)
+    peak_u = np.empty(at.size)
+    n_peaks = 0
+    for q in at:
+        low = node_u[q - 1]
+        high = node_u[q + 1]
+        if (node_kappa[q] < at_least or holds_any(held_u, low, high)
+                or holds_any(stop_u, low, high)):
+            continue
         width = high - low
         step = width / last
         best_i = 0
@@ -205,9 +215,9 @@ def refine_peaks(knots, coef, degree, lows, highs, kappa_floor):
                     break
                 piece_low = piece_high
                 span = find_span(knots, degree, n_ctrl, piece_low, span)
-        peak_u[p] = best_u
-        peak_k[p] = best_k
-    return peak_u, peak_k
+        peak_u[n_peaks] = best_u if best_k > node_kappa[q] else node_u[q]
+        n_peaks += 1
+    return peak_u[:n_peaks]
 
 
 @jit
@@ -331,7 +341,7 @@ def near_cusp_peaks(knots, coef, degree, u, kappa, near_u, kappa_floor):
     Where |C'| dips close to 0 without reaching it (the path turns back in a hairpin of a
     radius far below the sample spacing), kappa ~ 1/|C'|^2 peaks in a needle whose width in u
     is ~|C'|/|C''| there: neither neighbouring sample holds it, and sampling their bracket
-    (`refine_peaks`) can step over it. Seen on a degree-4 curve: samples 3,777 and 6,087 1/mm
+    (`refined_maxima`) can step over it. Seen on a degree-4 curve: samples 3,777 and 6,087 1/mm
     either side of a peak of 2.4e7, which the plan then passed at 0.11 mm/s, its velocity
     reversing within one period. The peak lies beside the minimum of |C'|: each near cusp
     whose kappa reaches kappa_floor and exceeds both samples around it is refined over a few
@@ -353,8 +363,10 @@ def near_cusp_peaks(knots, coef, degree, u, kappa, near_u, kappa_floor):
         if acc0 > 0.0:
             width = NEEDLE_WIDTHS * speed0 / acc0
             low, high = max(low, u0 - width), min(high, u0 + width)
-        peak, peak_k = refine_peaks(knots, coef, degree, np.array([low]), np.array([high]),
-                                    kappa_floor)
-        out[n] = peak[0] if peak_k[0] > k0 else u0
+        # the bracket as three nodes, the near cusp a maximum between two lower ones
+        none = np.empty(0)
+        out[n] = refined_maxima(knots, coef, degree, np.array([low, u0, high]),
+                                np.array([-np.inf, k0, -np.inf]), none, none, kappa_floor,
+                                -np.inf)[0]
         n += 1
     return out[:n]

@@ -205,34 +205,6 @@ def _hidden_bump(knots, coef, degree, low, high_u, high_kappa, kappa_floor, zero
 
 
 @jit
-def _grown(all_u, all_k, all_s, all_m, all_p, all_d, all_t, after, split, size, n_split, room):
-    """The refinement's node arrays with room for `room` nodes, the first size (and n_split of
-    split) copied."""
-    new_u = np.empty(room)
-    new_k = np.empty(room)
-    new_s = np.empty(room)
-    new_m = np.empty(room)
-    new_p = np.empty((room, 3))
-    new_d = np.empty((room, 3))
-    new_t = np.empty((room, 3))
-    new_after = np.empty(room, dtype=np.int64)
-    new_split = np.empty(room, dtype=np.int64)
-    for q in range(size):
-        new_u[q] = all_u[q]
-        new_k[q] = all_k[q]
-        new_s[q] = all_s[q]
-        new_m[q] = all_m[q]
-        for i in range(3):
-            new_p[q, i] = all_p[q, i]
-            new_d[q, i] = all_d[q, i]
-            new_t[q, i] = all_t[q, i]
-        new_after[q] = after[q]
-    for q in range(n_split):
-        new_split[q] = split[q]
-    return new_u, new_k, new_s, new_m, new_p, new_d, new_t, new_after, new_split
-
-
-@jit
 def refine_where_kappa_jumps_or_turns(knots, coef, degree, u, kappa, speed, pts, d1, tan,
                                       kappa_floor, zero_speed, floor_mm):
     """Step 4b: halve every interval across which kappa (above kappa_floor) changes by more than
@@ -257,17 +229,18 @@ def refine_where_kappa_jumps_or_turns(knots, coef, degree, u, kappa, speed, pts,
     check took it (NaN elsewhere): the arc length's quadrature starts there."""
     n_ctrl = coef.shape[0]
     most = REFINE_GROWTH_MAX * u.size
-    room = 2 * u.size  # grown when a round needs more (rarely: a grid grows ~1.4-fold)
-    all_u = np.empty(room)
-    all_k = np.empty(room)
-    all_s = np.empty(room)
-    all_m = np.empty(room)  # |C'| at the middle of the interval a node starts, NaN: not known
-    all_p = np.empty((room, 3))
-    all_d = np.empty((room, 3))
-    all_t = np.empty((room, 3))
-    after = np.empty(room, dtype=np.int64)
-    fresh = np.empty(room, dtype=np.int64)  # the first nodes of the intervals to look at
-    split = np.empty(room, dtype=np.int64)
+    # room for the most nodes the grid may grow to: pages never written take no memory (a grid
+    # grows ~1.4-fold), and growing the arrays when needed cost a third more to compile
+    all_u = np.empty(most)
+    all_k = np.empty(most)
+    all_s = np.empty(most)
+    all_m = np.empty(most)  # |C'| at the middle of the interval a node starts, NaN: not known
+    all_p = np.empty((most, 3))
+    all_d = np.empty((most, 3))
+    all_t = np.empty((most, 3))
+    after = np.empty(most, dtype=np.int64)
+    fresh = np.empty(most, dtype=np.int64)  # the first nodes of the intervals to look at
+    split = np.empty(most, dtype=np.int64)
     for q in range(u.size):
         all_u[q] = u[q]
         all_k[q] = kappa[q]
@@ -326,12 +299,6 @@ def refine_where_kappa_jumps_or_turns(knots, coef, degree, u, kappa, speed, pts,
                 n_split += 1
         if n_split == 0 or size + n_split > most:
             break
-        if size + n_split > room:
-            room = min(most, max(2 * room, size + n_split))
-            all_u, all_k, all_s, all_m, all_p, all_d, all_t, after, split = _grown(
-                all_u, all_k, all_s, all_m, all_p, all_d, all_t, after, split, size, n_split,
-                room)
-            fresh = np.empty(room, dtype=np.int64)
         n_fresh = 0
         for i in range(n_split):
             q = split[i]

@@ -23,18 +23,15 @@ PROBE_REL = 1e-6  # of a span's width: where the way out of a zero of C' at a kn
 KAPPA_BOUNDED_REL = 0.25  # kappa beside a zero changing by more than this over 16x: unbounded
 
 
-def find_corners(knots, coef, degree, breaks, floor_mm):
-    """Step 3a: interior knots of multiplicity >= degree where the unit tangent jumps (not
-    where the curve has no length on one side: that is an end). Not compiled (its kernels
-    are): it looks only at the knots of that multiplicity, which most curves have none of."""
+def find_corners(knots, coef, degree, breaks, floor_mm, full):
+    """Step 3a: interior knots of multiplicity >= degree (their indices into breaks, full,
+    from `stop_candidates`) where the unit tangent jumps (not where the curve has no length on
+    one side: that is an end). Not compiled (its kernels are): most curves have no such knot."""
     n_ctrl = coef.shape[0]
     eps = CORNER_PROBE_REL * (breaks[breaks.size - 1] - breaks[0])
-    out = np.empty(max(breaks.size - 2, 0))
+    out = np.empty(full.size)
     n = 0
-    inner = breaks[1:breaks.size - 1]
-    multiplicity = (np.searchsorted(knots, inner, side="right")
-                    - np.searchsorted(knots, inner, side="left"))
-    for b in np.flatnonzero(multiplicity >= degree) + 1:
+    for b in full:
         knot = breaks[b]
         _, _, _, h_before = _chord_from(knots, coef, degree, knot, -1.0,
                                         knot - breaks[b - 1], breaks[0], floor_mm)
@@ -363,10 +360,23 @@ def stop_candidates(knots, coef, degree, breaks, u, speed, pts, tangent, zero_sp
     """Step 3's search over the samples (see `classify_stops`): the zeros of C' it finds
     without refining (N,: first samples of runs at rest, and knots), the samples (I,) at a local
     minimum of |C'| that needs refining, and the intervals (J,) across which the path turns
-    back. The refinements are `classify_stops`' (rare: most curves have none, and their kernels
-    then never compile)."""
+    back; and the interior knots of multiplicity >= degree, where a corner may be (their
+    indices into breaks, for `find_corners`). The refinements are `classify_stops`' (rare: most
+    curves have none, and their kernels then never compile)."""
     n_ctrl = coef.shape[0]
     last = u.size - 1
+    full = np.empty(breaks.size, dtype=np.int64)
+    n_full = 0
+    k = 0
+    for b in range(1, breaks.size - 1):
+        while knots[k] < breaks[b]:
+            k += 1
+        multiplicity = 0
+        while k + multiplicity < knots.size and knots[k + multiplicity] == breaks[b]:
+            multiplicity += 1
+        if multiplicity >= degree:
+            full[n_full] = b
+            n_full += 1
     found = np.empty(u.size + breaks.size)
     n = 0
     minima = np.empty(u.size, dtype=np.int64)
@@ -444,4 +454,4 @@ def stop_candidates(knots, coef, degree, breaks, u, speed, pts, tangent, zero_sp
                 back[n_back, 1] = knot if side == 0 else u[at]
                 back[n_back, 2], back[n_back, 3], back[n_back, 4] = tx, ty, tz
                 n_back += 1
-    return found[:n], minima[:n_minima], turns[:n_turns], back[:n_back]
+    return found[:n], minima[:n_minima], turns[:n_turns], back[:n_back], full[:n_full]

@@ -54,12 +54,7 @@ import numpy as np
 from nurbsfeed.errors import CurveError
 from nurbsfeed.geometry.arclength import simpson_lengths
 from nurbsfeed.geometry.nurbs import NurbsCurve
-from nurbsfeed.geometry.peaks import (
-    boundary_maxima,
-    near_cusp_peaks,
-    prominent_maxima,
-    refine_peaks,
-)
+from nurbsfeed.geometry.peaks import boundary_maxima, near_cusp_peaks, refined_maxima
 from nurbsfeed.geometry.sampling import (
     ZERO_SPEED_REL,
     merge,
@@ -67,6 +62,7 @@ from nurbsfeed.geometry.sampling import (
     samples,
 )
 from nurbsfeed.geometry.stops import classify_stops, find_corners, stop_candidates
+from nurbsfeed.jit import jit
 
 # Simpson's tolerance per node interval, relative to the interval's length at the mean |C'|.
 # The accepted values carry the Richardson term, so they are far more accurate than this:
@@ -102,20 +98,17 @@ class Grid:
         return speed
 
 
+@jit
 def polygon_length(points):
-    """Length of the control polygon (N, 3): the curve is no longer. The legs are summed in
-    order (np.cumsum; np.sum pairs them): the grid's tolerances derive from the last bits."""
-    leg = np.diff(points, axis=0)
-    lengths = np.sqrt(leg[:, 0] ** 2 + leg[:, 1] ** 2 + leg[:, 2] ** 2)
-    return float(np.cumsum(lengths)[-1]) if lengths.size else 0.0
-
-
-def _holding(sorted_u: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
-    """Whether sorted_u (K,) has a value in [low, high], for each (P,) pair."""
-    if sorted_u.size == 0:
-        return np.zeros(low.size, dtype=bool)
-    q = np.searchsorted(sorted_u, low)
-    return (q < sorted_u.size) & (sorted_u[np.minimum(q, sorted_u.size - 1)] <= high)
+    """Length of the control polygon (N, 3; a curve's, read-only): the curve is no longer. The
+    legs are summed in order (np.sum would pair them): the grid's tolerances derive from the
+    last bits."""
+    total = 0.0
+    for i in range(points.shape[0] - 1):
+        total += math.sqrt((points[i + 1, 0] - points[i, 0]) ** 2
+                           + (points[i + 1, 1] - points[i, 1]) ** 2
+                           + (points[i + 1, 2] - points[i, 2]) ** 2)
+    return total
 
 
 def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, floor_mm):
@@ -125,36 +118,31 @@ def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, f
     samples (the arc length tolerance's scale).
 
     The steps are compiled and each is called once from here (a compiled driver would compile
-    every step's code a second time, into itself: seconds of the first run); the sorting and
-    masking of a few values between them is numpy's, and the classification of candidate stops
-    runs only on a curve that has some."""
+    every step's code a second time, into itself: seconds of the first run); between them a
+    few numpy calls sort and join what they found, and the corners and the classification of
+    candidate stops run only on a curve that has candidates."""
     u, kappa, speed, pts, d1, tan, mean_speed = samples(knots, coef, degree, breaks, spacing_mm)
     zero_speed = ZERO_SPEED_REL * mean_speed
-    idx = prominent_maxima(kappa)
-    refined_u, refined_kappa = refine_peaks(knots, coef, degree, u[idx - 1], u[idx + 1],
-                                            kappa_floor)
-    peak_u = np.where(refined_kappa > kappa[idx], refined_u, u[idx])
-    # kappa grows without bound into a cusp, so its "maximum" is the refinement's bracket end:
-    # a peak whose bracket holds a stop (below) adds nothing, the motion rests there anyway
-    corner_u = find_corners(knots, coef, degree, breaks, floor_mm)
-    found_u, minima, turns, back = stop_candidates(knots, coef, degree, breaks, u, speed, pts,
-                                                   tan, zero_speed, mean_speed, floor_mm)
-    stop_u, stop_cos = corner_u, np.zeros(corner_u.size)
+    found_u, minima, turns, back, full = stop_candidates(knots, coef, degree, breaks, u, speed,
+                                                         pts, tan, zero_speed, mean_speed,
+                                                         floor_mm)
+    stop_u = stop_cos = needle_u = np.empty(0)
+    if full.size:
+        stop_u = find_corners(knots, coef, degree, breaks, floor_mm, full)
+        stop_cos = np.zeros(stop_u.size)
     if found_u.size or minima.size or turns.size or back.shape[0]:
         zero_u, zero_cos, near_u = classify_stops(knots, coef, degree, breaks, u, tan,
                                                   zero_speed, mean_speed, floor_mm, kappa_floor,
                                                   found_u, minima, turns, back)
-        stop_u = np.concatenate((corner_u, zero_u))
+        stop_u = np.concatenate((stop_u, zero_u))
         stop_cos = np.concatenate((stop_cos, zero_cos))
         order = np.argsort(stop_u, kind="stable")
         stop_u = stop_u[order]
         stop_cos = stop_cos[order]
-        peak_u = np.concatenate((peak_u[~_holding(stop_u, u[idx - 1], u[idx + 1])],
-                                 near_cusp_peaks(knots, coef, degree, u, kappa, near_u,
-                                                 kappa_floor)))
-    elif stop_u.size:
-        peak_u = peak_u[~_holding(stop_u, u[idx - 1], u[idx + 1])]
-    peak_u = np.sort(peak_u)
+        needle_u = near_cusp_peaks(knots, coef, degree, u, kappa, near_u, kappa_floor)
+    peak_u = refined_maxima(knots, coef, degree, u, kappa, np.empty(0), stop_u, kappa_floor,
+                            -np.inf)
+    peak_u = np.sort(np.concatenate((peak_u, needle_u)) if needle_u.size else peak_u)
     beside_u = boundary_maxima(knots, coef, degree, breaks, u, peak_u, stop_u)
     if beside_u.size:
         peak_u = np.sort(np.concatenate((peak_u, beside_u)))
@@ -165,15 +153,10 @@ def _grid_nodes(knots, coef, degree, breaks, spacing_mm, extra_u, kappa_floor, f
         knots, coef, degree, u, kappa, speed, pts, d1, tan, kappa_floor, zero_speed, floor_mm)
     # a spike of kappa narrower than the samples shows only in the refined grid: its maxima
     # at or above kappa_floor that no peak's bracket holds are peaks too (refined likewise)
-    idx = prominent_maxima(kappa)
-    low, high = u[idx - 1], u[idx + 1]
-    new = (kappa[idx] >= kappa_floor) & ~_holding(peak_u, low, high) & ~_holding(stop_u, low,
-                                                                                 high)
-    if new.any():
-        idx = idx[new]
-        refined_u, refined_kappa = refine_peaks(knots, coef, degree, low[new], high[new],
-                                                kappa_floor)
-        added = np.sort(np.where(refined_kappa > kappa[idx], refined_u, u[idx]))
+    added = refined_maxima(knots, coef, degree, u, kappa, peak_u, stop_u, kappa_floor,
+                           kappa_floor)
+    if added.size:
+        added = np.sort(added)
         u, kappa, speed, pts, d1, tan = merge(knots, coef, degree, u, kappa, speed, pts, d1,
                                               tan, added, zero_speed)
         mid_speed = np.full(u.size, np.nan)  # (the new nodes split intervals: none known)
