@@ -31,6 +31,7 @@ from nurbsfeed.planning.path_model import (
     frames,
     jump_speed,
     kappa_n_jump,
+    kernel_array,
     motion_ratio,
     static_terms,
     with_roots,
@@ -51,7 +52,7 @@ def least_cycle_s(curve: NurbsCurve, grid: Grid, lim: Limits, fcap: np.ndarray) 
     law twice a period: a quarter circle under max_vel_x_mm_s 0.001 (10 mm of X travel, at
     least 10,000 s) took 53 s of CPU to be refused at 3,600 s."""
     least_s = np.empty(grid.u.size - 1)
-    _least_interval_s(grid.points_mm, grid.s_mm, np.array(fcap, dtype=float),
+    _least_interval_s(grid.points_mm, grid.s_mm, kernel_array(fcap),
                       limit_values(lim), least_s)
     return float(np.sum(least_s))
 
@@ -70,7 +71,7 @@ def _least_interval_s(points, s_mm, fcap, lims, out):
 def axis_capped(curve: NurbsCurve, grid: Grid, lim: Limits, cap: np.ndarray) -> np.ndarray:
     """The speed caps cap (M,) at the grid's nodes lowered by each axis's velocity limit."""
     out = np.empty(grid.u.size)
-    _axis_capped(grid.d1_mm, np.array(cap, dtype=float), limit_values(lim), out)
+    _axis_capped(grid.d1_mm, kernel_array(cap), limit_values(lim), out)
     return out
 
 
@@ -115,7 +116,7 @@ def path_limit(curve: NurbsCurve, grid: Grid, lim: Limits, raw_limit: np.ndarray
         static = np.minimum(static, caps)
     limit = np.empty(grid.u.size)
     keys = _limit_and_keys(knots, coef, degree, curve.span_breaks, grid.u, static,
-                           np.array(raw_limit, dtype=float), speed,
+                           kernel_array(raw_limit), speed,
                            ZERO_SPEED_REL * float(speed.mean()), lims, limit)
     return limit, keys
 
@@ -224,7 +225,7 @@ def arc_parameters(curve: NurbsCurve, grid: Grid, s_mm: np.ndarray) -> np.ndarra
     the interval; elsewhere (beside a zero of C', a stop or an end, where s grows like a power of
     u - u0 and a linear guess lands orders of magnitude closer to the zero, where kappa is
     rounding noise) by bisection on the arc length, integrated from the interval's first node."""
-    s_at = np.array(np.ravel(s_mm), dtype=float)  # a copy: the kernel sees one array type
+    s_at = kernel_array(np.ravel(s_mm))
     u = np.empty(s_at.size)
     interval = np.empty(s_at.size, dtype=np.int64)
     is_uneven = np.empty(s_at.size, dtype=np.bool_)

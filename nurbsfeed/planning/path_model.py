@@ -74,6 +74,13 @@ class Frames:
     binormal: np.ndarray
 
 
+def kernel_array(a: object, dtype: type = float) -> np.ndarray:
+    """a as the one array type the kernels here compile for: writable, C-contiguous, of dtype
+    (copied only where it is not one already; the kernels never write into their inputs)."""
+    out: np.ndarray = np.asarray(a, dtype=dtype)
+    return out if out.flags.writeable and out.flags.c_contiguous else out.copy()
+
+
 @jit
 def dot3(ax, ay, az, bx, by, bz):
     """a . b, summed as numpy's einsum sums three products, (x + z) + y: the kernels give the
@@ -83,7 +90,7 @@ def dot3(ax, ay, az, bx, by, bz):
 
 def frames(curve: NurbsCurve, u: np.ndarray) -> Frames:
     """The frame and the curvature terms at parameters u (M,) (`frame` at each)."""
-    at = np.array(np.ravel(u), dtype=float)  # a copy: the kernel sees one array type
+    at = kernel_array(np.ravel(u))
     scalars = np.empty((3, at.size))
     vectors = np.empty((3, at.size, 3))
     _frames_at(curve.knots, curve.span_polynomials, curve.degree, at, scalars, vectors)
@@ -204,8 +211,8 @@ def static_limit(f: Frames, lim: Limits) -> np.ndarray:
     low = np.empty(f.kappa.size)
     roots = np.empty((5, f.kappa.size))
     kappa, dkappa_ds, torsion, tangent, normal, binormal = (
-        np.array(a, dtype=float) for a in (f.kappa, f.dkappa_ds, f.torsion, f.tangent, f.normal,
-                                           f.binormal))
+        kernel_array(a) for a in (f.kappa, f.dkappa_ds, f.torsion, f.tangent, f.normal,
+                                  f.binormal))
     _static_terms_of(limit_values(lim), kappa, dkappa_ds, torsion, tangent, normal, binormal, low,
                      roots)
     return with_roots(low, roots)
@@ -299,7 +306,7 @@ def kappa_n_jumps(curve: NurbsCurve, u_breaks: np.ndarray, zero_speed: float = 0
     frame to jump from (kappa N there is rounding noise, 1e15 beside a span of no length once
     set a limit of 2e-14 mm/s): 0, the knot is a zero of C' that the grid handles (a rest where
     the path turns back, kappa from inside the spans where it goes on)."""
-    at = np.array(np.ravel(u_breaks), dtype=float)  # a copy: the kernel sees one array type
+    at = kernel_array(np.ravel(u_breaks))
     out = np.empty((at.size, 3))
     _kappa_n_jumps_at(curve.knots, curve.span_polynomials, curve.degree, at, float(zero_speed),
                       out)
@@ -336,7 +343,7 @@ def jump_speeds(jump: np.ndarray, lim: Limits) -> np.ndarray:
     """The speed (K,) at which jumps D (K, 3) of kappa N, read over one period as v^2 |D| / T,
     keep J_n and every axis's jerk (inf where D = 0)."""
     out = np.empty(jump.shape[0])
-    _jump_speeds_of(np.array(jump, dtype=float).reshape(-1, 3), limit_values(lim), out)
+    _jump_speeds_of(kernel_array(np.reshape(jump, (-1, 3))), limit_values(lim), out)
     return out
 
 
@@ -352,8 +359,8 @@ def geometry_rows(curve: NurbsCurve, lim: Limits, u: np.ndarray, feed_mm_s: np.n
         raise ValueError("geometry rows are the path model's (jerk_model: path)")
     out = np.empty((u.size, G_SIZE))
     _geometry_rows(curve.knots, curve.span_polynomials, curve.degree, curve.span_breaks,
-                   np.array(u, dtype=float), np.array(feed_mm_s, dtype=float),
-                   np.array(at_knot, dtype=np.int64), limit_values(lim), out)
+                   kernel_array(u), kernel_array(feed_mm_s), kernel_array(at_knot, np.int64),
+                   limit_values(lim), out)
     return out
 
 
