@@ -52,14 +52,13 @@ def curvature_threshold(lim: Limits) -> float:
 # a profile's limits as one array (`limit_values`), in this order, for the compiled kernels
 (L_PERIOD, L_FEED, L_CHORD, L_ACC, L_JERK, L_NORMAL_ACC, L_NORMAL_JERK, L_AXIS_VEL, L_AXIS_ACC,
  L_AXIS_JERK) = (0, 1, 2, 3, 4, 5, 6, 7, 10, 13)  # the axes' X, Y, Z from each L_AXIS_...
-L_SIZE = 16
 
 
 @functools.lru_cache(maxsize=64)
 def limit_values(lim: Limits) -> np.ndarray:
-    """lim's numbers (L_SIZE,), read-only, in the order of the L_ indices: what the kernels
-    read, one array instead of a dozen arguments (a curve's limits are equal Limits objects
-    each time, so this is made once per profile and feed)."""
+    """lim's numbers (16,), read-only, in the order of the L_ indices: what the kernels read,
+    one array instead of a dozen arguments (a curve's limits are equal Limits objects each
+    time, so this is made once per profile and feed)."""
     out = np.array([lim.period_s, lim.feed_mm_s, lim.chord_mm, lim.acc_mm_s2, lim.jerk_mm_s3,
                     lim.normal_acc_mm_s2, lim.normal_jerk_mm_s3, *lim.axis_vel_mm_s,
                     *lim.axis_acc_mm_s2, *lim.axis_jerk_mm_s3], dtype=float)
