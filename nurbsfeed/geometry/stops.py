@@ -261,8 +261,8 @@ def classify_stops(knots, coef, degree, breaks, u, tangent, zero_speed, mean_spe
     |C'| is at most zero_speed is a zero of C'; each is classified by `_zero_is_smooth`: a
     corner (the tangent jumps), a cusp or a reversal (it turns back), or a zero beside which
     kappa is unbounded is a stop (u, and the cosine of the turn); a removable zero is not (its
-    kappa is the one-sided limit, see `_fill_singular`). A candidate whose |C'| refines to a
-    minimum above zero_speed is a near cusp: where the path turns back across it
+    kappa is the one-sided limit, see `sampling.fill_singular`). A candidate whose |C'| refines
+    to a minimum above zero_speed is a near cusp: where the path turns back across it
     (`_near_cusp_turn`) it is a stop too, a hairpin passed at rest; the others are returned as
     (R,) parameters, where kappa may peak in a needle far narrower than the samples
     (`near_cusp_peaks`). Returns (Q,) parameters (sorted) and cosines, and the (R,) near
