@@ -40,13 +40,15 @@ EPS = float(np.finfo(float).eps)
 
 
 @jit
-def simpson_lengths(knots, coef, degree, nodes, speed_at_nodes, tol_per_u):
+def simpson_lengths(knots, coef, degree, nodes, speed_at_nodes, speed_at_middles, tol_per_u):
     """Cumulative arc length at the nodes: (M,) -> (M,), s[0] = 0.
 
-    coef: the curve's span polynomials; speed_at_nodes: |C'| at the nodes, already known to the
-    caller (the grid computes it with the curvature). The interval [u_i, u_i+1] is integrated
-    to tol_per_u * (u_i+1 - u_i) (length units per unit of u). An interval that needs more
-    than MAX_SPLITS splits makes s NaN from its end on: the caller refuses the curve there.
+    coef: the curve's span polynomials; speed_at_nodes: |C'| at the nodes, and
+    speed_at_middles (M,): at the middle of each node's interval to the next, NaN where not
+    known; both computed by the caller already (the grid computes them with the curvature). The
+    interval [u_i, u_i+1] is integrated to tol_per_u * (u_i+1 - u_i) (length units per unit of
+    u). An interval that needs more than MAX_SPLITS splits makes s NaN from its end on: the
+    caller refuses the curve there.
     """
     n_ctrl = coef.shape[0]
     cumulative = np.empty(nodes.size)  # (not np.zeros: numba would compile it)
@@ -61,10 +63,12 @@ def simpson_lengths(knots, coef, degree, nodes, speed_at_nodes, tol_per_u):
         b = nodes[i + 1]
         fa = speed_at_nodes[i]
         fb = speed_at_nodes[i + 1]
-        m = 0.5 * (a + b)
-        span = find_span(knots, degree, n_ctrl, m, span)
-        _, _, _, dx, dy, dz = point_d1(knots, coef, degree, span, m)
-        fm = math.sqrt(dx * dx + dy * dy + dz * dz)
+        fm = speed_at_middles[i]
+        if fm != fm:
+            m = 0.5 * (a + b)
+            span = find_span(knots, degree, n_ctrl, m, span)
+            _, _, _, dx, dy, dz = point_d1(knots, coef, degree, span, m)
+            fm = math.sqrt(dx * dx + dy * dy + dz * dz)
         whole = (b - a) / 6.0 * (fa + 4.0 * fm + fb)
         tol = tol_per_u * (b - a)
         depth = 0.0

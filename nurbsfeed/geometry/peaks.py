@@ -128,8 +128,14 @@ def _brent_max(knots, coef, degree, span, a, b, x, kappa_x, tol):
 
 
 @jit
-def refine_peak(knots, coef, degree, low, high, kappa_floor):
-    """Step 2b: the maximum of kappa in [low, high] (u, kappa).
+def refined_maxima(knots, coef, degree, node_u, node_kappa, held_u, stop_u, kappa_floor,
+                   at_least):
+    """Step 2b: the curvature maxima of the nodes node_u, node_kappa (M,), refined (P,): each
+    prominent maximum (`prominent_maxima`) with kappa at least at_least whose bracket, its
+    neighbouring nodes, holds no value of held_u nor of stop_u (both sorted; kappa grows
+    without bound into a cusp, so its "maximum" is the bracket's end: the motion rests at a
+    stop anyway), as the maximum of kappa in its bracket, or the node itself where that is no
+    higher.
 
     kappa is smooth inside a span; at a knot it may have a kink, or a jump where the curve is
     only C1 there. First, ZOOM_SAMPLES evenly spaced samples, and every knot inside with the
@@ -143,64 +149,75 @@ def refine_peak(knots, coef, degree, low, high, kappa_floor):
     """
     n_ctrl = coef.shape[0]
     last = ZOOM_SAMPLES - 1
-    width = high - low
-    step = width / last
-    best_i = 0
-    best_k = -1.0
-    span = degree
-    for i in range(ZOOM_SAMPLES):
-        u = low + width * (i / last) if i < last else high
-        span = find_span(knots, degree, n_ctrl, u, span)
-        c = point_d2(knots, coef, degree, span, u)
-        kappa, _ = curvature(c[3], c[4], c[5], c[6], c[7], c[8])
-        if kappa > best_k:  # the first maximum; NaN (C' = 0) never wins
-            best_k = kappa
-            best_i = i
-    best_u = low + width * (best_i / last) if best_i < last else high
-    a = low + width * (max(best_i - 1, 0) / last)
-    b = low + width * ((best_i + 1) / last) if best_i + 1 < last else high
-    span = find_span(knots, degree, n_ctrl, low, degree)
-    while knots[span + 1] < high:  # the knots inside, from both sides
-        knot = knots[span + 1]
-        kappa = _kappa_on_span(knots, coef, degree, span, knot)
-        span = find_span(knots, degree, n_ctrl, knot, span)
-        kappa = max(kappa, _kappa_on_span(knots, coef, degree, span, knot))
-        if kappa > best_k:
-            best_u, best_k = knot, kappa
-            a, b = max(low, knot - step), min(high, knot + step)
-    if best_k < 0.5 * kappa_floor:
-        return best_u, best_k
-    tol = PEAK_BRACKET_REL * width
-    inside_u = best_u
-    inside_k = best_k
-    piece_low = a
-    span = find_span(knots, degree, n_ctrl, a, degree)
-    while True:
-        piece_high = min(b, knots[span + 1])
-        k_low = _kappa_on_span(knots, coef, degree, span, piece_low)
-        k_high = _kappa_on_span(knots, coef, degree, span, piece_high)
-        for u, kappa in ((piece_low, k_low), (piece_high, k_high)):
+    at = prominent_maxima(node_kappa)
+    peak_u = np.empty(at.size)
+    n_peaks = 0
+    for q in at:
+        low = node_u[q - 1]
+        high = node_u[q + 1]
+        if (node_kappa[q] < at_least or holds_any(held_u, low, high)
+                or holds_any(stop_u, low, high)):
+            continue
+        width = high - low
+        step = width / last
+        best_i = 0
+        best_k = -1.0
+        span = degree
+        for i in range(ZOOM_SAMPLES):
+            u = low + width * (i / last) if i < last else high
+            span = find_span(knots, degree, n_ctrl, u, span)
+            c = point_d2(knots, coef, degree, span, u)
+            kappa, _ = curvature(c[3], c[4], c[5], c[6], c[7], c[8])
+            if kappa > best_k:  # the first maximum; NaN (C' = 0) never wins
+                best_k = kappa
+                best_i = i
+        best_u = low + width * (best_i / last) if best_i < last else high
+        a = low + width * (max(best_i - 1, 0) / last)
+        b = low + width * ((best_i + 1) / last) if best_i + 1 < last else high
+        span = find_span(knots, degree, n_ctrl, low, degree)
+        while knots[span + 1] < high:  # the knots inside, from both sides
+            knot = knots[span + 1]
+            kappa = _kappa_on_span(knots, coef, degree, span, knot)
+            span = find_span(knots, degree, n_ctrl, knot, span)
+            kappa = max(kappa, _kappa_on_span(knots, coef, degree, span, knot))
             if kappa > best_k:
-                best_u, best_k = u, kappa
-        if piece_high - piece_low > 4.0 * tol:
-            start_u, start_k = piece_low, -1.0
-            if piece_low < inside_u < piece_high:
-                start_u, start_k = inside_u, inside_k
-            for end, into in ((piece_low, 1.0), (piece_high, -1.0)):
-                if a < end < b:  # a knot
-                    u = end + into * KNOT_PROBE_REL * width
-                    kappa = _kappa_on_span(knots, coef, degree, span, u)
-                    if kappa > start_k:
-                        start_u, start_k = u, kappa
-            if start_k > max(k_low, k_high):
-                u, kappa = _brent_max(knots, coef, degree, span, piece_low, piece_high,
-                                      start_u, start_k, tol)
-                if kappa > best_k:
-                    best_u, best_k = u, kappa
-        if piece_high >= b:
-            return best_u, best_k
-        piece_low = piece_high
-        span = find_span(knots, degree, n_ctrl, piece_low, span)
+                best_u, best_k = knot, kappa
+                a, b = max(low, knot - step), min(high, knot + step)
+        if best_k >= 0.5 * kappa_floor:
+            tol = PEAK_BRACKET_REL * width
+            inside_u = best_u
+            inside_k = best_k
+            piece_low = a
+            span = find_span(knots, degree, n_ctrl, a, degree)
+            while True:
+                piece_high = min(b, knots[span + 1])
+                k_low = _kappa_on_span(knots, coef, degree, span, piece_low)
+                k_high = _kappa_on_span(knots, coef, degree, span, piece_high)
+                for u, kappa in ((piece_low, k_low), (piece_high, k_high)):
+                    if kappa > best_k:
+                        best_u, best_k = u, kappa
+                if piece_high - piece_low > 4.0 * tol:
+                    start_u, start_k = piece_low, -1.0
+                    if piece_low < inside_u < piece_high:
+                        start_u, start_k = inside_u, inside_k
+                    for end, into in ((piece_low, 1.0), (piece_high, -1.0)):
+                        if a < end < b:  # a knot
+                            u = end + into * KNOT_PROBE_REL * width
+                            kappa = _kappa_on_span(knots, coef, degree, span, u)
+                            if kappa > start_k:
+                                start_u, start_k = u, kappa
+                    if start_k > max(k_low, k_high):
+                        u, kappa = _brent_max(knots, coef, degree, span, piece_low,
+                                              piece_high, start_u, start_k, tol)
+                        if kappa > best_k:
+                            best_u, best_k = u, kappa
+                if piece_high >= b:
+                    break
+                piece_low = piece_high
+                span = find_span(knots, degree, n_ctrl, piece_low, span)
+        peak_u[n_peaks] = best_u if best_k > node_kappa[q] else node_u[q]
+        n_peaks += 1
+    return peak_u[:n_peaks]
 
 
 @jit
@@ -297,6 +314,21 @@ def first_at_or_above(sorted_x, x):
 
 
 @jit
+def first_above(sorted_x, x):
+    """The first index q with sorted_x[q] > x (sorted_x.size if none): np.searchsorted's right
+    side (see `first_at_or_above`)."""
+    lo = 0
+    hi = sorted_x.size
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if sorted_x[mid] <= x:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@jit
 def holds_any(sorted_u, low, high):
     """Whether sorted_u (K,) has a value in [low, high]."""
     q = first_at_or_above(sorted_u, low)
@@ -309,7 +341,7 @@ def near_cusp_peaks(knots, coef, degree, u, kappa, near_u, kappa_floor):
     Where |C'| dips close to 0 without reaching it (the path turns back in a hairpin of a
     radius far below the sample spacing), kappa ~ 1/|C'|^2 peaks in a needle whose width in u
     is ~|C'|/|C''| there: neither neighbouring sample holds it, and sampling their bracket
-    (`refine_peak`) can step over it. Seen on a degree-4 curve: samples 3,777 and 6,087 1/mm
+    (`refined_maxima`) can step over it. Seen on a degree-4 curve: samples 3,777 and 6,087 1/mm
     either side of a peak of 2.4e7, which the plan then passed at 0.11 mm/s, its velocity
     reversing within one period. The peak lies beside the minimum of |C'|: each near cusp
     whose kappa reaches kappa_floor and exceeds both samples around it is refined over a few
@@ -331,7 +363,10 @@ def near_cusp_peaks(knots, coef, degree, u, kappa, near_u, kappa_floor):
         if acc0 > 0.0:
             width = NEEDLE_WIDTHS * speed0 / acc0
             low, high = max(low, u0 - width), min(high, u0 + width)
-        peak, peak_k = refine_peak(knots, coef, degree, low, high, kappa_floor)
-        out[n] = peak if peak_k > k0 else u0
+        # the bracket as three nodes, the near cusp a maximum between two lower ones
+        none = np.empty(0)
+        out[n] = refined_maxima(knots, coef, degree, np.array([low, u0, high]),
+                                np.array([-np.inf, k0, -np.inf]), none, none, kappa_floor,
+                                -np.inf)[0]
         n += 1
     return out[:n]

@@ -23,18 +23,16 @@ PROBE_REL = 1e-6  # of a span's width: where the way out of a zero of C' at a kn
 KAPPA_BOUNDED_REL = 0.25  # kappa beside a zero changing by more than this over 16x: unbounded
 
 
-def find_corners(knots, coef, degree, breaks, floor_mm):
-    """Step 3a: interior knots of multiplicity >= degree where the unit tangent jumps (not
-    where the curve has no length on one side: that is an end). Not compiled (its kernels
-    are): it looks at each knot once."""
+def find_corners(knots, coef, degree, breaks, floor_mm, full):
+    """Step 3a: interior knots of multiplicity >= degree (their indices into breaks, full,
+    from `stop_candidates`) where the unit tangent jumps (not where the curve has no length on
+    one side: that is an end). Not compiled (its kernels are): most curves have no such knot."""
     n_ctrl = coef.shape[0]
     eps = CORNER_PROBE_REL * (breaks[breaks.size - 1] - breaks[0])
-    out = np.empty(max(breaks.size - 2, 0))
+    out = np.empty(full.size)
     n = 0
-    for b in range(1, breaks.size - 1):
+    for b in full:
         knot = breaks[b]
-        if np.count_nonzero(knots == knot) < degree:
-            continue
         _, _, _, h_before = _chord_from(knots, coef, degree, knot, -1.0,
                                         knot - breaks[b - 1], breaks[0], floor_mm)
         _, _, _, h_after = _chord_from(knots, coef, degree, knot, 1.0,
@@ -47,7 +45,7 @@ def find_corners(knots, coef, degree, breaks, floor_mm):
         _, _, _, rx, ry, rz = point_d1(knots, coef, degree, span, knot + eps)
         norm_l = math.sqrt(lx * lx + ly * ly + lz * lz)
         norm_r = math.sqrt(rx * rx + ry * ry + rz * rz)
-        if norm_l == 0.0 or norm_r == 0.0:  # C' = 0 beside the knot: `find_stops` decides
+        if norm_l == 0.0 or norm_r == 0.0:  # C' = 0 beside the knot: `classify_stops` decides
             continue
         cos = (lx / norm_l) * (rx / norm_r) + (ly / norm_l) * (ry / norm_r) + (
             lz / norm_l) * (rz / norm_r)
@@ -249,9 +247,10 @@ def _near_cusp_turn(knots, coef, degree, u0):
     return (ix * ox + iy * oy + iz * oz) / norm
 
 
-def find_stops(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed, mean_speed,
-               floor_mm, kappa_floor):
-    """Step 3: the interior points where C' vanishes and the motion must come to rest.
+def classify_stops(knots, coef, degree, breaks, u, tangent, zero_speed, mean_speed, floor_mm,
+                   kappa_floor, found_u, minima, turns, back):
+    """Step 3: the interior points where C' vanishes and the motion must come to rest, from the
+    candidates `stop_candidates` found on the samples u (M,) with their unit tangents (M, 3).
 
     Candidates are the samples where |C'| has a local minimum below ZERO_CANDIDATE_REL of its
     mean (refined by `_refine_zero` inside the bracket of their neighbours; a zero whose
@@ -262,20 +261,19 @@ def find_stops(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed, 
     |C'| is at most zero_speed is a zero of C'; each is classified by `_zero_is_smooth`: a
     corner (the tangent jumps), a cusp or a reversal (it turns back), or a zero beside which
     kappa is unbounded is a stop (u, and the cosine of the turn); a removable zero is not (its
-    kappa is the one-sided limit, see `_fill_singular`). A candidate whose |C'| refines to a
-    minimum above zero_speed is a near cusp: where the path turns back across it
+    kappa is the one-sided limit, see `sampling.fill_singular`). A candidate whose |C'| refines
+    to a minimum above zero_speed is a near cusp: where the path turns back across it
     (`_near_cusp_turn`) it is a stop too, a hairpin passed at rest; the others are returned as
     (R,) parameters, where kappa may peak in a needle far narrower than the samples
     (`near_cusp_peaks`). Returns (Q,) parameters (sorted) and cosines, and the (R,) near
     cusps.
 
-    The search over the samples (`_stop_candidates`) is compiled; the refinement and the
+    The search over the samples (`stop_candidates`) is compiled; the refinement and the
     classification of the few candidates it finds are not (their kernels are, the first time a
-    curve has such a candidate), nor is the sorting: numba compiles a quicksort and a binary
-    search of its own for each array type, seconds of the first run for a few values.
+    curve has such a candidate; the grid calls this only then), nor is the sorting: numba
+    compiles a quicksort and a binary search of its own for each array type, seconds of the
+    first run for a few values.
     """
-    found_u, minima, turns, back = _stop_candidates(knots, coef, degree, breaks, u, speed, pts,
-                                                    tangent, zero_speed, mean_speed, floor_mm)
     found, near = list(found_u), []
     near_speed = ZERO_CANDIDATE_REL * mean_speed
     for q in minima:
@@ -357,15 +355,28 @@ def find_stops(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed, 
 
 
 @jit
-def _stop_candidates(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed,
-                     mean_speed, floor_mm):
-    """Step 3's search over the samples (see `find_stops`): the zeros of C' it finds without
-    refining (N,: first samples of runs at rest, and knots), the samples (I,) at a local
+def stop_candidates(knots, coef, degree, breaks, u, speed, pts, tangent, zero_speed,
+                    mean_speed, floor_mm):
+    """Step 3's search over the samples (see `classify_stops`): the zeros of C' it finds
+    without refining (N,: first samples of runs at rest, and knots), the samples (I,) at a local
     minimum of |C'| that needs refining, and the intervals (J,) across which the path turns
-    back. The refinements are `find_stops`' (rare: most curves have none, and their kernels then
-    never compile)."""
+    back; and the interior knots of multiplicity >= degree, where a corner may be (their
+    indices into breaks, for `find_corners`). The refinements are `classify_stops`' (rare: most
+    curves have none, and their kernels then never compile)."""
     n_ctrl = coef.shape[0]
     last = u.size - 1
+    full = np.empty(breaks.size, dtype=np.int64)
+    n_full = 0
+    k = 0
+    for b in range(1, breaks.size - 1):
+        while knots[k] < breaks[b]:
+            k += 1
+        multiplicity = 0
+        while k + multiplicity < knots.size and knots[k + multiplicity] == breaks[b]:
+            multiplicity += 1
+        if multiplicity >= degree:
+            full[n_full] = b
+            n_full += 1
     found = np.empty(u.size + breaks.size)
     n = 0
     minima = np.empty(u.size, dtype=np.int64)
@@ -443,4 +454,4 @@ def _stop_candidates(knots, coef, degree, breaks, u, speed, pts, tangent, zero_s
                 back[n_back, 1] = knot if side == 0 else u[at]
                 back[n_back, 2], back[n_back, 3], back[n_back, 4] = tx, ty, tz
                 n_back += 1
-    return found[:n], minima[:n_minima], turns[:n_turns], back[:n_back]
+    return found[:n], minima[:n_minima], turns[:n_turns], back[:n_back], full[:n_full]

@@ -40,18 +40,12 @@ from nurbsfeed.planning.basis import (
     AT_REST,
     BETWEEN,
     G_CAP,
-    G_D,
-    G_K,
-    G_KAPPA,
-    G_KS,
-    G_SIZE,
-    G_T,
     ChainEnds,
 )
 from nurbsfeed.planning.grid import Grid
-from nurbsfeed.planning.limits import Limits, speed_limit
+from nurbsfeed.planning.limits import Limits
 from nurbsfeed.planning.path_check import arc_parameters
-from nurbsfeed.planning.path_model import frames, kappa_n_jumps
+from nurbsfeed.planning.path_model import geometry_rows
 from nurbsfeed.planning.rows import point_ratio
 
 REST_POINTS = (0.25, 0.5, 1.0)  # where a rest cell's limits are read, as y
@@ -119,26 +113,9 @@ def point_geometry(curve: NurbsCurve, lim: Limits, u: np.ndarray, feed_mm_s: np.
     """The geometry rows (N, G_SIZE) at parameters u (N,) (module docstring of `Layout`): the
     jump of kappa N where at_knot (N,) names the knot's index into curve.span_breaks (-1
     elsewhere), and the squared speed cap: the chord error and normal acceleration limit
-    (`limits.speed_limit`), the programmed feed feed_mm_s (N,), each axis's velocity."""
-    f = frames(curve, u)
-    out = np.zeros((u.size, G_SIZE))
-    k = f.kappa
-    out[:, G_KAPPA] = k
-    out[:, G_T:G_T + 3] = f.tangent
-    out[:, G_K:G_K + 3] = k[:, None] * f.normal
-    out[:, G_KS:G_KS + 3] = (-(k**2)[:, None] * f.tangent + f.dkappa_ds[:, None] * f.normal
-                            + (k * f.torsion)[:, None] * f.binormal)
-    knot = at_knot >= 0
-    if knot.any():
-        out[knot, G_D:G_D + 3] = kappa_n_jumps(curve, curve.span_breaks[at_knot[knot]])
-    cap = np.minimum(speed_limit(k, lim, feed_mm_s), lim.feed_mm_s)
-    with np.errstate(divide="ignore"):
-        for x in range(3):
-            tx = np.abs(f.tangent[:, x])
-            cap = np.minimum(cap, np.where(tx > 0.0, lim.axis_vel_mm_s[x]
-                                           / np.where(tx > 0.0, tx, 1.0), np.inf))
-    out[:, G_CAP] = cap**2
-    return out
+    (`limits.speed_limit`), the programmed feed feed_mm_s (N,), each axis's velocity
+    (`path_model.geometry_rows`, one compiled pass)."""
+    return geometry_rows(curve, lim, u, feed_mm_s, at_knot)
 
 
 def _knot_index(curve: NurbsCurve, u: np.ndarray) -> np.ndarray:

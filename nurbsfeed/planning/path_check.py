@@ -2,7 +2,9 @@
 §2b): `path_limit` (the static terms and the jumps of kappa N at knots), `least_cycle_s` (a
 lower bound on any plan's cycle, to refuse a curve planned for hours before planning it), and
 `law_ratios` / `path_excess`, which sample a law twice a period, each sample's parameter from
-its arc length (`arc_parameters`), and measure every path-model quantity against its limit."""
+its arc length (`arc_parameters`), and measure every path-model quantity against its limit.
+Their work per node or sample is compiled (the grid's C and C' at its nodes read, not evaluated
+again); numpy keeps the cube roots and the sums, whose rounding the kernels would not share."""
 
 from __future__ import annotations
 
@@ -11,13 +13,32 @@ import math
 import numpy as np
 
 from nurbsfeed.geometry.arclength import gauss_lengths
+from nurbsfeed.geometry.kernel import find_span, point_d3
 from nurbsfeed.geometry.nurbs import NurbsCurve
+from nurbsfeed.geometry.peaks import first_above
+from nurbsfeed.jit import jit
 from nurbsfeed.planning.grid import ZERO_SPEED_REL, Grid
-from nurbsfeed.planning.limits import Limits
-from nurbsfeed.planning.path_model import frames, jump_limits, motion_ratio, static_limit
+from nurbsfeed.planning.limits import (
+    L_AXIS_VEL,
+    L_FEED,
+    Limits,
+    least,
+    limit_values,
+    most,
+)
+from nurbsfeed.planning.path_model import (
+    frame,
+    frames,
+    jump_speed,
+    kappa_n_jump,
+    kernel_array,
+    motion_ratio,
+    static_terms,
+    with_roots,
+)
 from nurbsfeed.planning.timelaw import TimeLaw
 
-# the path model's own minima of the limit that become key points (`_binding_minima`)
+# the path model's own minima of the limit that become key points (`path_limit`)
 MINIMUM_WINDOW = 3  # nodes on each side
 MINIMUM_RISE = 2.0  # the rise of the limit within them, on both sides (or to a neighbour)
 
@@ -30,53 +51,41 @@ def least_cycle_s(curve: NurbsCurve, grid: Grid, lim: Limits, fcap: np.ndarray) 
     The path model checks it against max_curve_time_s before its fix rounds, which sample the
     law twice a period: a quarter circle under max_vel_x_mm_s 0.001 (10 mm of X travel, at
     least 10,000 s) took 53 s of CPU to be refused at 3,600 s."""
-    travel = np.abs(np.diff(curve.point(grid.u), axis=0))
-    axis_s = np.max(travel / np.asarray(lim.axis_vel_mm_s), axis=1)
-    cap = np.minimum(np.maximum(fcap[:-1], fcap[1:]), lim.feed_mm_s)
-    return float(np.sum(np.maximum(np.diff(grid.s_mm) / cap, axis_s)))
+    least_s = np.empty(grid.u.size - 1)
+    _least_interval_s(grid.points_mm, grid.s_mm, kernel_array(fcap),
+                      limit_values(lim), least_s)
+    return float(np.sum(least_s))
+
+
+@jit
+def _least_interval_s(points, s_mm, fcap, lims, out):
+    """`least_cycle_s`'s bound per grid interval into out (M - 1,)."""
+    for i in range(out.size):
+        axis_s = -math.inf
+        for x in range(3):
+            axis_s = most(axis_s, abs(points[i + 1, x] - points[i, x]) / lims[L_AXIS_VEL + x])
+        cap = least(most(fcap[i], fcap[i + 1]), lims[L_FEED])
+        out[i] = most((s_mm[i + 1] - s_mm[i]) / cap, axis_s)
 
 
 def axis_capped(curve: NurbsCurve, grid: Grid, lim: Limits, cap: np.ndarray) -> np.ndarray:
     """The speed caps cap (M,) at the grid's nodes lowered by each axis's velocity limit."""
-    tangent = frames(curve, grid.u).tangent
-    out = np.minimum(np.asarray(cap, dtype=float), lim.feed_mm_s)
-    with np.errstate(divide="ignore"):
-        for x in range(3):
-            tx = np.abs(tangent[:, x])
-            out = np.minimum(out, np.where(tx > 0.0, lim.axis_vel_mm_s[x]
-                                           / np.where(tx > 0.0, tx, 1.0), np.inf))
+    out = np.empty(grid.u.size)
+    _axis_capped(grid.d1_mm, kernel_array(cap), limit_values(lim), out)
     return out
 
 
-def _binding_minima(limit: np.ndarray, raw_limit: np.ndarray) -> np.ndarray:
-    """Nodes where the path model's own terms set the limit (below the paper's raw limit) and
-    it is low: the lowest of MINIMUM_WINDOW nodes on each side (stops, limit 0, aside), with
-    the limit rising to MINIMUM_RISE times it on both sides within them (a minimum), or the low
-    side of a step (a neighbour's limit MINIMUM_RISE times it: kappa' jumps at a cubic's knots
-    with its third derivative). The paper's limit is lowest at curvature peaks, which are key
-    points; the path model's has lows of its own (kappa' and the per-axis terms), and one
-    between two key points left the fix rounds to cap the whole segment at it, or to slow the
-    whole curve: a curve reached a step from 24.7 to 0.55 mm/s at 3.4 mm/s and was slowed 6.3
-    times (13 s for the paper model's 1.6 s). Shallower lows are left to the fix rounds and the
-    shoulders: a key point holds the acceleration at zero, and one at every 2 % low made the
-    dense test curves up to 20 % slower."""
-    w = MINIMUM_WINDOW
-    floor = np.where(limit > 0.0, limit, np.inf)
-    padded_min = np.pad(floor, w, mode="edge")
-    padded_max = np.pad(limit, w, mode="edge")
-    windows_min = np.lib.stride_tricks.sliding_window_view(padded_min, 2 * w + 1)
-    windows_max = np.lib.stride_tricks.sliding_window_view(padded_max, 2 * w + 1)
-    left_min = windows_min[:, :w].min(axis=1)
-    right_min = windows_min[:, w + 1:].min(axis=1)
-    rise = MINIMUM_RISE * limit
-    binding = (limit < raw_limit) & (limit > 0.0) & np.isfinite(limit)
-    minimum = ((left_min > limit) & (right_min >= limit)
-               & (windows_max[:, :w].max(axis=1) >= rise)
-               & (windows_max[:, w + 1:].max(axis=1) >= rise))
-    step = (windows_max[:, w - 1] >= rise) | (windows_max[:, w + 1] >= rise)
-    keys = binding & (minimum | step)
-    keys[[0, -1]] = False
-    return np.flatnonzero(keys)
+@jit
+def _axis_capped(d1, cap, lims, out):
+    """`axis_capped` node by node: the unit tangent from C' as `path_model.frame` takes it."""
+    for i in range(out.size):
+        speed = math.sqrt(d1[i, 0] * d1[i, 0] + d1[i, 1] * d1[i, 1] + d1[i, 2] * d1[i, 2])
+        v = least(cap[i], lims[L_FEED])
+        if speed > 0.0:
+            for x in range(3):
+                along = abs(d1[i, x] / speed)
+                v = least(v, lims[L_AXIS_VEL + x] / along if along > 0.0 else math.inf)
+        out[i] = v
 
 
 def path_limit(curve: NurbsCurve, grid: Grid, lim: Limits, raw_limit: np.ndarray,
@@ -85,33 +94,123 @@ def path_limit(curve: NurbsCurve, grid: Grid, lim: Limits, raw_limit: np.ndarray
     static_limit`, the speed at knots where kappa N jumps, and caps (M,) from `path_excess`),
     and the nodes that become key points (the law passes them at zero acceleration, at a speed
     no higher than their limit): the knots where that jump sets the limit, and the limit's own
-    minima (`_binding_minima`)."""
-    static = static_limit(frames(curve, grid.u), lim)
+    minima. The paper's limit is lowest at curvature peaks, which are key points; the path
+    model's has lows of its own (kappa' and the per-axis terms), and one between two key points
+    left the fix rounds to cap the whole segment at it, or to slow the whole curve: a curve
+    reached a step from 24.7 to 0.55 mm/s at 3.4 mm/s (kappa' jumps at a cubic's knots with its
+    third derivative) and was slowed 6.3 times (13 s for the paper model's 1.6 s). Shallower
+    lows are left to the fix rounds and the shoulders: a key point holds the acceleration at
+    zero, and one at every 2 % low made the dense test curves up to 20 % slower.
+
+    Where C' = 0 (a removable zero the grid passes at speed) the frame is rounding noise
+    (kappa 2e30 at a knot of |C'| 5e-14 once planned a curve at 3e20 s): a node there takes the
+    lower of its neighbours' static limits, as the grid takes kappa there from inside."""
+    knots, coef, degree = curve.knots, curve.span_polynomials, curve.degree
+    lims = limit_values(lim)
+    low = np.empty(grid.u.size)
+    roots = np.empty((5, grid.u.size))
+    _node_static_terms(knots, coef, degree, grid.u, lims, low, roots)
+    static = with_roots(low, roots)
+    speed = grid.speed_mm
     if caps is not None:
         static = np.minimum(static, caps)
-    # where C' = 0 (a removable zero the grid passes at speed) the frame is rounding noise
-    # (kappa 2e30 at a knot of |C'| 5e-14 once planned a curve at 3e20 s): the lower of the
-    # neighbours' limits, as the grid takes kappa there from inside
-    speed = curve.speed(grid.u)
-    zero = speed <= ZERO_SPEED_REL * speed.mean()
-    if zero.any() and not zero.all():
-        index = np.arange(static.size)
-        before = np.maximum.accumulate(np.where(zero, -1, index))  # last node with a frame
-        after = np.minimum.accumulate(np.where(zero, static.size, index)[::-1])[::-1]
-        padded = np.concatenate([static, [np.inf, np.inf]])  # indices -1 and M read inf
-        static = np.where(zero, np.minimum(padded[before], padded[after]), static)
-    limit = np.minimum(raw_limit, static)
-    breaks = curve.span_breaks[1:-1]
-    nodes = np.searchsorted(grid.u, breaks)
-    inside = nodes < grid.u.size
-    nodes, breaks = nodes[inside], breaks[inside]
-    on_node = grid.u[nodes] == breaks
-    nodes, breaks = nodes[on_node], breaks[on_node]
-    at_jump = jump_limits(curve, breaks, lim, ZERO_SPEED_REL * float(speed.mean()))
-    lower = at_jump < limit[nodes]
-    limit[nodes[lower]] = at_jump[lower]
-    keys = np.union1d(nodes[lower], _binding_minima(limit, raw_limit))
-    return limit, keys.astype(np.int64)
+    limit = np.empty(grid.u.size)
+    keys = _limit_and_keys(knots, coef, degree, curve.span_breaks, grid.u, static,
+                           kernel_array(raw_limit), speed,
+                           ZERO_SPEED_REL * float(speed.mean()), lims, limit)
+    return limit, keys
+
+
+@jit
+def _node_static_terms(knots, coef, degree, u, lims, low, roots):
+    """`path_model.static_terms` at every node into low (M,) and roots (5, M)."""
+    span = degree
+    for i in range(u.size):
+        span = find_span(knots, degree, coef.shape[0], u[i], span)
+        c = point_d3(knots, coef, degree, span, u[i])
+        f = frame(c[3], c[4], c[5], c[6], c[7], c[8], c[9], c[10], c[11])
+        low[i] = static_terms(lims, f[0], f[1], f[2], f[3], f[4], f[5], f[6], f[7], f[8], f[9],
+                              f[10], f[11], roots, i)
+
+
+@jit
+def _limit_and_keys(knots, coef, degree, breaks, u, static, raw_limit, speed, zero_speed, lims,
+                    limit):
+    """`path_limit` from the static limit (M,) at the nodes u (M,): the limit into limit (M,),
+    and the key nodes (K,), ascending."""
+    size = u.size
+    zero = np.empty(size, dtype=np.bool_)
+    n_zero = 0
+    for i in range(size):
+        zero[i] = speed[i] <= zero_speed
+        n_zero += zero[i]
+    for i in range(size):
+        limit[i] = least(raw_limit[i], static[i])
+    if 0 < n_zero < size:
+        moving = -1  # the last node with a frame so far
+        before = np.empty(size, dtype=np.int64)
+        for i in range(size):
+            if not zero[i]:
+                moving = i
+            before[i] = moving
+        moving = size  # the next node with a frame, from the end
+        for i in range(size - 1, -1, -1):
+            if not zero[i]:
+                moving = i
+            else:
+                side = static[before[i]] if before[i] >= 0 else math.inf
+                other = static[moving] if moving < size else math.inf
+                limit[i] = least(raw_limit[i], least(side, other))
+    key = np.empty(size, dtype=np.bool_)
+    for i in range(size):
+        key[i] = False
+    q = 0
+    for b in range(1, breaks.size - 1):  # the knots on nodes (both ascending)
+        while q < size and u[q] < breaks[b]:
+            q += 1
+        if q < size and u[q] == breaks[b]:
+            jx, jy, jz = kappa_n_jump(knots, coef, degree, breaks[b], zero_speed)
+            at_jump = jump_speed(jx, jy, jz, lims)
+            if at_jump < limit[q]:
+                limit[q] = at_jump
+                key[q] = True
+    # the path model's own lows (`path_limit`): a node where its terms set the limit (below the
+    # paper's raw limit), the lowest of MINIMUM_WINDOW nodes on each side (stops, limit 0,
+    # aside) with the limit rising to MINIMUM_RISE times it on both sides within them, or the
+    # low side of a step (a neighbour MINIMUM_RISE times it); never an end
+    w = MINIMUM_WINDOW
+    last = size - 1
+    for i in range(1, last):
+        here = limit[i]
+        if not (here < raw_limit[i] and here > 0.0 and math.isfinite(here)):
+            continue
+        rise = MINIMUM_RISE * here
+        if limit[i - 1] >= rise or limit[i + 1] >= rise:
+            key[i] = True
+            continue
+        # the windows beside the node, their ends held at the curve's ends
+        left_min = right_min = math.inf  # of the limit, where above 0
+        left_max = limit[max(i - w, 0)]
+        right_max = limit[min(i + 1, last)]
+        for j in range(1, w + 1):
+            before = limit[max(i - j, 0)]
+            after = limit[min(i + j, last)]
+            left_min = least(left_min, before if before > 0.0 else math.inf)
+            right_min = least(right_min, after if after > 0.0 else math.inf)
+            left_max = most(left_max, before)
+            right_max = most(right_max, after)
+        if left_min > here and right_min >= here and left_max >= rise and right_max >= rise:
+            key[i] = True
+    n_keys = 0
+    for i in range(size):
+        n_keys += key[i]
+    keys = np.empty(n_keys, dtype=np.int64)
+    n_keys = 0
+    for i in range(size):
+        if key[i]:
+            keys[n_keys] = i
+            n_keys += 1
+    return keys
 
 
 PATH_SAMPLES_PER_PERIOD = 2  # the path model's final check samples the law this densely
@@ -126,17 +225,16 @@ def arc_parameters(curve: NurbsCurve, grid: Grid, s_mm: np.ndarray) -> np.ndarra
     the interval; elsewhere (beside a zero of C', a stop or an end, where s grows like a power of
     u - u0 and a linear guess lands orders of magnitude closer to the zero, where kappa is
     rounding noise) by bisection on the arc length, integrated from the interval's first node."""
-    u = np.interp(s_mm, grid.s_mm, grid.u)
-    speed = curve.speed(grid.u)
-    interval = np.clip(np.searchsorted(grid.s_mm, s_mm, side="right") - 1, 0, grid.u.size - 2)
-    low_speed = np.minimum(speed[interval], speed[interval + 1])
-    high_speed = np.maximum(speed[interval], speed[interval + 1])
-    uneven = np.flatnonzero(high_speed > UNEVEN_SPEED * low_speed)
-    if uneven.size == 0:
+    s_at = kernel_array(np.ravel(s_mm))
+    u = np.empty(s_at.size)
+    interval = np.empty(s_at.size, dtype=np.int64)
+    is_uneven = np.empty(s_at.size, dtype=np.bool_)
+    if not _linear_parameters(grid.s_mm, grid.u, grid.speed_mm, s_at, u, interval, is_uneven):
         return u
+    uneven = np.flatnonzero(is_uneven)
     first = interval[uneven]
     lo, hi = grid.u[first].copy(), grid.u[first + 1].copy()
-    target = s_mm[uneven] - grid.s_mm[first]
+    target = s_at[uneven] - grid.s_mm[first]
     start = grid.u[first]
     for _ in range(ARC_BISECTIONS):
         mid = 0.5 * (lo + hi)
@@ -146,6 +244,42 @@ def arc_parameters(curve: NurbsCurve, grid: Grid, s_mm: np.ndarray) -> np.ndarra
         hi = np.where(below, hi, mid)
     u[uneven] = 0.5 * (lo + hi)
     return u
+
+
+@jit
+def _linear_parameters(s_nodes, u_nodes, speed, s_mm, u, interval, uneven):
+    """`arc_parameters`' linear part: u at s_mm (N,) by np.interp's arithmetic on the nodes
+    (s_nodes, u_nodes (M,)), each one's interval (its first node, within 0 .. M - 2) and whether
+    |C'| (speed (M,) at the nodes) changes across it by more than UNEVEN_SPEED; into u,
+    interval, uneven (N,). Returns whether any is uneven."""
+    size = s_nodes.size
+    j = 0  # the last node at or below the last s: the next one's search starts there
+    any_uneven = False
+    for i in range(s_mm.size):
+        x = s_mm[i]
+        if x != x:
+            j = size - 1  # NaN sorts last
+        elif not (0 <= j < size and s_nodes[j] <= x and (j == size - 1 or x < s_nodes[j + 1])):
+            j = first_above(s_nodes, x) - 1
+        if x != x:
+            u[i] = x
+        elif j < 0:
+            u[i] = u_nodes[0]
+        elif j == size - 1 or s_nodes[j] == x:
+            u[i] = u_nodes[j]
+        else:
+            slope = (u_nodes[j + 1] - u_nodes[j]) / (s_nodes[j + 1] - s_nodes[j])
+            u[i] = slope * (x - s_nodes[j]) + u_nodes[j]
+            if u[i] != u[i]:  # as np.interp: the other end, then a flat piece's value
+                u[i] = slope * (x - s_nodes[j + 1]) + u_nodes[j + 1]
+                if u[i] != u[i] and u_nodes[j] == u_nodes[j + 1]:
+                    u[i] = u_nodes[j]
+        q = min(max(j, 0), size - 2)
+        interval[i] = q
+        uneven[i] = (most(speed[q], speed[q + 1])
+                     > UNEVEN_SPEED * least(speed[q], speed[q + 1]))
+        any_uneven = any_uneven or uneven[i]
+    return any_uneven
 
 
 def law_ratios(curve: NurbsCurve, grid: Grid, law: TimeLaw, lim: Limits):
