@@ -104,8 +104,9 @@ def _plan(window: ChainWindow, start: _Start, machine: Machine, method: str,
     merged = ChainWindow(tuple(blocks), tuple(between))
     block, chain, _ = chain_block(merged, machine.limits)
     if start.ends.start is None:
-        plan, landings = _checked_block(block, machine, method)
-        return _Planned(window, start, blocks, between, block, chain, plan, landings)
+        checked = _checked_block(block, machine, method)
+        return _Planned(window, start, blocks, between, block, chain, checked.plan,
+                        checked.landings)
     lim = machine.limits
     moving = plan_window(block.curve, lim, block.feed_u, block.feed_mm_s, start.ends,
                          start.seed, machine.max_curve_time_s)
