@@ -60,7 +60,7 @@ class Checked:
             yield chunk, None
 
 
-class _Keeper:
+class Keeper:
     """Reads a stepping's chunks as positions (`PointReader`), keeping chunks and readings
     while they hold at most KEPT_POINTS points."""
 
@@ -78,6 +78,12 @@ class _Keeper:
                 if self.points > KEPT_POINTS:
                     self.kept = None
             yield n_read, maxima
+
+    def checked(self, plan: Plan, landed: tuple[Landing, ...] | None) -> Checked:
+        """The plan whose stepping was read, with how it landed (None: its chunks were not all
+        read) and the chunks kept."""
+        kept = self.kept if landed is not None else None  # (all of them read)
+        return Checked(plan, landed, None if kept is None else tuple(kept))
 
 
 def plan_block(block: CurveBlock, machine: Machine, method: str = "rk2c") -> Plan:
@@ -134,14 +140,13 @@ def _checked_plan(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s:
         slowdown = 1.0
         for round_ in range(POSITION_ROUNDS + 1):
             stepping = Stepping(plan, method)
-            keeper = _Keeper()
+            keeper = Keeper()
             speed, asks = slowdown_from_readings(caps, keeper.readings(stepping.chunks()))
             landed = stepping.landed
             asks = max(speed if speed > 1.0 + POSITION_SPEED_REL else 1.0,
                        asks if asks > 1.0 + POSITION_REL else 1.0)
             if asks <= 1.0:
-                kept = keeper.kept if landed is not None else None  # (all of them read)
-                return Checked(plan, landed, None if kept is None else tuple(kept))
+                return keeper.checked(plan, landed)
             if round_ == POSITION_ROUNDS:
                 break
             slowdown *= asks * (1.0 + POSITION_REL)
