@@ -27,7 +27,7 @@ import threading
 import time
 from collections.abc import Callable
 from types import ModuleType
-from typing import Any, TypeVar
+from typing import Any, TypeVar, cast
 
 F = TypeVar("F", bound=Callable[..., object])
 
@@ -107,6 +107,19 @@ def jit(func: F) -> F:
     if _njit is None:
         return func
     return _njit(func)
+
+
+def inline(func: F) -> F:
+    """`func`, a `jit` kernel, compiled into each kernel that calls it (numba's
+    `inline="always"`) rather than called from it; as it is without numba. For the few
+    evaluations an inner loop makes at every step: a call costs the loop about as much as a
+    short function's work. The arithmetic is the same, operation for operation."""
+    python_func = getattr(func, "py_func", func)
+    if _njit is None:
+        return cast(F, python_func)
+    import numba
+
+    return cast(F, numba.njit(cache=True, nogil=True, inline="always")(python_func))
 
 
 def watch_compiling(after_s: float, notify: Callable[[], None]) -> Any:

@@ -184,9 +184,10 @@ def convert_window(window: ChainWindow, index: int, out: BinaryIO, machine: Mach
     label = (f'curve {index} "{block.curve.name}"' if n_curves == 1
              else f'curves {index}-{last_index} (a chain) "{block.curve.name}"')
     try:
-        plan, landings = _checked_block(block, machine, method)
+        checked = _checked_block(block, machine, method)
     except CurveError as exc:
         raise CurveError(f"{label}: {exc.message}", exc.location) from None
+    plan = checked.plan
     n_points = 1 + plan.n_periods
     period_s = plan.limits.period_s
     guard = MotionGuard(dataclasses.replace(plan.limits,
@@ -223,9 +224,9 @@ def convert_window(window: ChainWindow, index: int, out: BinaryIO, machine: Mach
     # written up to it
     last_k: list[int] = []
     joint_u = chain.joint_u
-    for chunk in Stepping(plan, method, landings).chunks():
+    for chunk, maxima in checked.chunks(method):
         try:
-            guard.check(chunk.points)
+            guard.check(chunk.points, maxima)
         except CurveError as exc:
             raise exc.at(block.location) from None
         while len(last_k) < joint_u.size and chunk.u[-1] > joint_u[len(last_k)]:

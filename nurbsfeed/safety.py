@@ -187,11 +187,15 @@ class MotionGuard:
             self.jerk_mm_s3 = math.hypot(lim.jerk_mm_s3, lim.normal_jerk_mm_s3)
             self.max_jerk_mm = self.jerk_mm_s3 * period**3 * margin[2] + 8.0 * GUARD_ABS_MM
 
-    def check(self, points: np.ndarray) -> None:
-        """points (N, 3): the next points of the curve, one period apart."""
+    def check(self, points: np.ndarray, maxima: np.ndarray | None = None) -> None:
+        """points (N, 3): the next points of the curve, one period apart. maxima: their
+        `PointReader` reading, where the same chunks were read in the same order from the
+        curve's first point (verified.py reads them so): the differences are not taken again."""
         points = np.ascontiguousarray(points, dtype=float)
         joined = np.concatenate([self.tail, points])
-        if not self._within(difference_maxima(joined)):
+        if maxima is None:
+            maxima = difference_maxima(joined)
+        if not self._within(maxima):
             self._refuse(points)
         self.tail = joined[-3:].copy()
         self.seen += points.shape[0]
@@ -269,9 +273,32 @@ class MotionGuard:
                              f"nothing was written (a safety check: please report this curve)")
 
 
+class PointReader:
+    """A curve's points read chunk by chunk, in order, for their largest differences: each
+    chunk with the last three points before it, as `MotionGuard.check` reads them, so that the
+    guard can take a reading made before (verified.py) instead of its own."""
+
+    def __init__(self) -> None:
+        self.tail = np.empty((0, 3))
+
+    def read(self, points: np.ndarray) -> tuple[int, np.ndarray]:
+        """The next points (N, 3): the points read with them (N plus those before them, at most
+        3) and their `_difference_maxima`."""
+        joined = np.concatenate([self.tail, np.ascontiguousarray(points, dtype=float)])
+        self.tail = joined[-3:].copy()
+        return joined.shape[0], difference_maxima(joined)
+
+
 def slowdown_from_points(lim: Limits, chunks: Iterable[np.ndarray]) -> tuple[float, float]:
-    """The least uniform slowdowns (>= 1) after which the points (each chunk (N, 3), one period
-    apart, in order) keep their limits, read from their differences (a slowdown by lambda
+    """`slowdown_from_readings` of the points (each chunk (N, 3), one period apart, in order)."""
+    reader = PointReader()
+    return slowdown_from_readings(lim, (reader.read(points) for points in chunks))
+
+
+def slowdown_from_readings(lim: Limits, readings: Iterable[tuple[int, np.ndarray]]
+                           ) -> tuple[float, float]:
+    """The least uniform slowdowns (>= 1) after which a curve's points keep their limits, read
+    from their differences (`PointReader.read` of each chunk, in order; a slowdown by lambda
     divides a k-th difference by lambda^k): the one the speeds ask (the path's, under
     lim.feed_mm_s, and each axis's velocity), which the motion guard holds within
     GUARD_FEED_REL, and the one every axis's acceleration and jerk and the jerk vector (within
@@ -281,13 +308,9 @@ def slowdown_from_points(lim: Limits, chunks: Iterable[np.ndarray]) -> tuple[flo
               (lim.axis_vel_mm_s, lim.axis_acc_mm_s2, lim.axis_jerk_mm_s3)]
     jerk = math.hypot(lim.jerk_mm_s3, lim.normal_jerk_mm_s3)
     speed, worst = 1.0, 1.0
-    tail = np.empty((0, 3))
-    for points in chunks:
-        joined = np.concatenate([tail, points])
-        tail = joined[-3:]
-        maxima = difference_maxima(joined)
+    for n_read, maxima in readings:
         for k, per_axis in enumerate(limits, start=1):
-            if joined.shape[0] <= k:  # no difference of this order yet
+            if n_read <= k:  # no difference of this order yet
                 break
             first = (_D1, _D2, _D3)[k - 1]
             ratio = float(np.max(maxima[first:first + 3] / (per_axis * period**k)))

@@ -25,7 +25,6 @@ from nurbsfeed.errors import CurveError
 from nurbsfeed.files import ENCODING, ERRORS
 from nurbsfeed.gcode.profile_record import record_lines
 from nurbsfeed.gcode.writer import MoveWriter, chain_comment, comment_line, rapid_line
-from nurbsfeed.interpolate.landing import Landing
 from nurbsfeed.interpolate.stepping import Stepping
 from nurbsfeed.joint_lines import JointLines, write_lines
 from nurbsfeed.machine import Machine
@@ -36,9 +35,9 @@ from nurbsfeed.planning.planner import plan_window
 from nurbsfeed.planning.window import Seed, hand_on
 from nurbsfeed.program import CurveBlock, PassThrough
 from nurbsfeed.rest_moves import RestMoves, rest_move_periods
-from nurbsfeed.safety import MotionGuard, feed_cap_mm_s, slowdown_from_points
+from nurbsfeed.safety import MotionGuard, feed_cap_mm_s, slowdown_from_readings
 from nurbsfeed.trace import write_trace_rows
-from nurbsfeed.verified import POSITION_REL, POSITION_SPEED_REL, _checked_block
+from nurbsfeed.verified import POSITION_REL, POSITION_SPEED_REL, Checked, Keeper, _checked_block
 
 # the comment of a window the next section continues (the chain goes on: check joins them)
 CONTINUED = ", continued"
@@ -70,8 +69,13 @@ class _Planned:
     between: list[tuple[PassThrough, ...]]
     block: CurveBlock
     chain: Chain
-    plan: Plan
-    landings: tuple[Landing, ...] | None
+    # the plan, how it landed and its points where they were kept when it was read
+    # (verified.Checked): finding the hand-on point and writing take them from here
+    checked: Checked
+
+    @property
+    def plan(self) -> Plan:
+        return self.checked.plan
 
 
 class ChainOutput:
@@ -104,22 +108,23 @@ def _plan(window: ChainWindow, start: _Start, machine: Machine, method: str,
     merged = ChainWindow(tuple(blocks), tuple(between))
     block, chain, _ = chain_block(merged, machine.limits)
     if start.ends.start is None:
-        plan, landings = _checked_block(block, machine, method)
-        return _Planned(window, start, blocks, between, block, chain, plan, landings)
+        return _Planned(window, start, blocks, between, block, chain,
+                        _checked_block(block, machine, method))
     lim = machine.limits
     moving = plan_window(block.curve, lim, block.feed_u, block.feed_mm_s, start.ends,
                          start.seed, machine.max_curve_time_s)
     if moving is None:
         return None
-    plan = moving
-    stepping = Stepping(plan, method)
+    stepping = Stepping(moving, method)
     caps = dataclasses.replace(lim, feed_mm_s=min(feed_cap_mm_s(lim, block), lim.feed_mm_s))
     # read from its points as any plan is (verified.verified_plan), but not slowed: its start
     # is the state it was handed
-    speed, asks = slowdown_from_points(caps, (chunk.points for chunk in stepping.chunks()))
+    keeper = Keeper()
+    speed, asks = slowdown_from_readings(caps, keeper.readings(stepping.chunks()))
     if speed > 1.0 + POSITION_SPEED_REL or asks > 1.0 + POSITION_REL:
         return None
-    return _Planned(window, start, blocks, between, block, chain, plan, stepping.landed)
+    return _Planned(window, start, blocks, between, block, chain,
+                    keeper.checked(moving, stepping.landed))
 
 
 def _hand_on_point(planned: _Planned, method: str) -> tuple[int, float] | None:
@@ -129,7 +134,7 @@ def _hand_on_point(planned: _Planned, method: str) -> tuple[int, float] | None:
     n_written = len(planned.blocks) - len(planned.window.ahead)
     u_cut = float(chain.u_start[n_written])
     candidates: list[tuple[int, float]] = []
-    for chunk in Stepping(planned.plan, method, planned.landings).chunks():
+    for chunk, _ in planned.checked.chunks(method):
         keep = chunk.u <= u_cut
         candidates.extend(zip(range(chunk.k0, chunk.k0 + int(keep.sum())), chunk.u[keep]))
         candidates = candidates[-HAND_ON_TRIES:]
@@ -218,7 +223,8 @@ def _write(planned: _Planned, out: ChainOutput, index: int, upto: int | None,
     between = planned.between[:len(planned.blocks) - 1]
     lines = JointLines(out.writer, out.out, tuple(between))
     joint_u = planned.chain.joint_u
-    for chunk in Stepping(plan, out.method, planned.landings).chunks():
+    # (the readings are not taken: the guard reads on from the last window's points)
+    for chunk, _ in planned.checked.chunks(out.method):
         if chunk.stretch is None:  # the start: the chain's first point, or the last written
             if first_part and out.trace is not None:
                 out.trace_s = write_trace_rows(out.trace, index, chunk, period_s, out.trace_s,

@@ -409,7 +409,7 @@ def test_a_speed_above_the_feed_by_less_than_the_acceleration_margin_is_slowed(
     import nurbsfeed.verified as verified
 
     asked = iter([(1.001, 1.0), (1.0, 1.0)])
-    monkeypatch.setattr(verified, "slowdown_from_points", lambda lim, chunks: next(asked))
+    monkeypatch.setattr(verified, "slowdown_from_readings", lambda lim, readings: next(asked))
     curve = NurbsCurve.build(3, [0, 0, 0, 0, 1, 1, 1, 1],
                              [[0, 0, 0], [10, 5, 0], [20, -5, 0], [30, 0, 0]])
     lim = DEFAULT.limits

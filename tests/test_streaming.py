@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nurbsfeed import pipeline
+from nurbsfeed import pipeline, verified
 from nurbsfeed.errors import CurveError
 from nurbsfeed.interpolate import stepping as stepping_module
 from nurbsfeed.interpolate.landing import BUMP_PERIODS
@@ -26,6 +26,7 @@ from nurbsfeed.planning.limits import Limits
 from nurbsfeed.planning.planner import plan_curve
 from nurbsfeed.planning.scurve_plan import MAX_STRETCH_PERIODS, _whole_periods
 from nurbsfeed.program import CurveBlock
+from nurbsfeed.safety import PointReader
 from tests.conftest import ROOT, SAMPLES
 from tests.test_cli import run
 from tests.test_planning_interpolation import line
@@ -133,6 +134,40 @@ def test_stepping_with_the_landings_found_steps_the_same_points(
             assert np.array_equal(a.u, b.u) and np.array_equal(a.points, b.points)
             assert np.array_equal(a.ds_mm, b.ds_mm)
             assert all(np.array_equal(x, y) for x, y in zip(a.kinematics(), b.kinematics()))
+
+
+@pytest.mark.parametrize("kept_points", [verified.KEPT_POINTS, 100])
+def test_the_points_read_for_the_plan_are_the_points_written(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, kept_points: int) -> None:
+    """Under the path model the conversion writes the points `verified` read (with their
+    differences' readings, which the motion guard takes instead of its own) where there are at
+    most KEPT_POINTS, else steps the plan again with its landings: the same program either way,
+    and the same points and readings as a stepping of its own."""
+    monkeypatch.setattr(verified, "KEPT_POINTS", kept_points)
+    machine = load_machine("default")
+    blocks = [item.in_mm() for item in json_items(many_period_program(tmp_path))
+              if isinstance(item, CurveBlock)]
+    out = io.BytesIO()
+    for index, block in enumerate(blocks):
+        checked = CHECKED_BLOCK(block, machine, "rk2c")
+        assert checked.landings is not None
+        kept = checked.kept
+        assert (kept is None) == (1 + checked.plan.n_periods > kept_points)
+        reader = PointReader()
+        again = list(Stepping(checked.plan, landings=checked.landings).chunks())
+        given = list(checked.chunks("rk2c"))
+        assert len(given) == len(again)
+        for (chunk, maxima), other in zip(given, again):
+            assert np.array_equal(chunk.u, other.u) and np.array_equal(chunk.points, other.points)
+            assert np.array_equal(chunk.ds_mm, other.ds_mm)
+            _, read = reader.read(other.points)
+            assert maxima is None or np.array_equal(maxima, read, equal_nan=True)
+        convert_block(block, index, out, machine, "rk2c", None)
+    monkeypatch.setattr(verified, "KEPT_POINTS", 0)
+    again_out = io.BytesIO()
+    for index, block in enumerate(blocks):
+        convert_block(block, index, again_out, machine, "rk2c", None)
+    assert out.getvalue() == again_out.getvalue()
 
 
 def test_a_stepping_not_exhausted_has_not_landed(paper_limits: Limits) -> None:

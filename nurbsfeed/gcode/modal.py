@@ -239,6 +239,27 @@ class ModalState:
             self.unknown_g = unknown[-1]
         self._move(block, g, m, axes)
 
+    def apply_plain_move(self, motion: int | None,
+                         axes: list[tuple[str, float, int | None]], feed: Word | None) -> None:
+        """`apply` for a block of only a G0 or G1 (motion 0 or 10; None: none), X, Y, Z words
+        (axis, value, decimals written) and an F of at least zero, each at most once, under G0
+        or G1 and no canned cycle where it has no G word (gcode.plain_moves): what `apply`
+        does to such a block, `_goto` included."""
+        if feed is not None:
+            self.apply_feed(feed)
+        if motion is not None:
+            self.motion = motion
+            self.cycle = None
+            self.unknown_g = None
+        for axis, value, decimals in axes:
+            if not self.incremental:
+                self.pos[axis] = AxisPos(value, decimals)
+                continue
+            current = self.pos[axis]
+            if current.value is not None:
+                self.pos[axis] = AxisPos(current.value + value,
+                                         coarser_decimals(current.decimals, decimals))
+
     def _set_units(self, units: str) -> None:
         if units == self.units:
             return

@@ -22,9 +22,13 @@ from __future__ import annotations
 import math
 
 from nurbsfeed.choices import METHOD_NAMES
-from nurbsfeed.geometry.kernel import find_span, point_d1
+from nurbsfeed.geometry import kernel
 from nurbsfeed.interpolate.solved_steps import chord_step, leg_step
-from nurbsfeed.jit import jit
+from nurbsfeed.jit import inline, jit
+
+# `_step_run` evaluates the curve up to six times a step: compiled into the loop, not called
+find_span = inline(kernel.find_span)
+point_d1 = inline(kernel.point_d1)
 
 METHODS = {name: code for code, name in enumerate(METHOD_NAMES)}  # name -> kernel code
 # what `_step_run` stopped for: the end, or a step it hands back to `chord_step` or `leg_step`

@@ -17,7 +17,7 @@ from functools import cached_property
 import numpy as np
 
 from nurbsfeed.interpolate.kernels import METHODS, SLOW_SPEED_REL
-from nurbsfeed.interpolate.landing import LANDING_MARGIN_REL, Bump, Landing, Stretch
+from nurbsfeed.interpolate.landing import Bump, Landing, Stretch
 from nurbsfeed.interpolate.targets import plan_times
 from nurbsfeed.planning.plan import Plan
 from nurbsfeed.planning.timelaw import TimeLaw
@@ -204,10 +204,7 @@ class Stepping:
                 landing = self.given[i]
                 stretch.replay(landing)
             else:
-                sigma = 1.0
-                if code == METHODS["rk2c"] and stretch.total > 0.0:
-                    sigma = min(1.0, 1.0 - stretch.drift / stretch.total + LANDING_MARGIN_REL)
-                landing = stretch.land(sigma)
+                landing = stretch.land(stretch.first_sigma())
             self.landings.append(landing)
             self.runs += landing.runs
             st = StretchLaw(k0, stretch.n, law, stretch.t_a, stretch.t_b,

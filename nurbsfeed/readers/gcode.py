@@ -9,7 +9,8 @@ Call chain for one line: `tokenizer.tokenize_line` (`siemens.tokenize_siemens_li
 Sinumerik program; for a plain "K_ X_ Y_ Z_ [R_]" line inside
 a G06.2 curve, `fanuc.NurbsCurveReader.take_line` reads the text directly instead, with the same
 result, and `take_run` reads a whole run of such lines at once in compiled code, point_lines.py;
-`take_knot_line` reads a plain closing "K_" line the same way)
+`take_knot_line` reads a plain closing "K_" line the same way; outside a NURBS block a plain
+straight move "[N_ ][G0 |G1 ]X_ Y_ Z_ F_" is read and executed without words, `_plain_move`)
 -> if a NURBS block is open, its reader
 (`fanuc.NurbsCurveReader`, `linuxcnc.G52BlockReader` or `siemens.BsplineReader`) takes the block,
 and the CurveBlock is yielded when the block completes, after the comment, blank and N-only lines
@@ -48,7 +49,7 @@ from nurbsfeed.choices import DIALECTS
 from nurbsfeed.errors import InputError, Location
 from nurbsfeed.files import BOM
 from nurbsfeed.gcode import point_lines
-from nurbsfeed.gcode.fanuc import NurbsCurveReader, stray_knot
+from nurbsfeed.gcode.fanuc import LINEAR_MODES, NurbsCurveReader, stray_knot
 from nurbsfeed.gcode.linuxcnc import G52BlockReader
 from nurbsfeed.gcode.linuxcnc_splines import G5, G5_1, is_spline_block, read_spline
 from nurbsfeed.gcode.modal import (
@@ -64,6 +65,7 @@ from nurbsfeed.gcode.modal import (
     tolerance,
 )
 from nurbsfeed.gcode.nurbs_block import FinishedCurve, first_word, motion_words
+from nurbsfeed.gcode.plain_moves import plain_move
 from nurbsfeed.gcode.siemens import BSPLINE, SUFFIXES, BsplineReader, tokenize_siemens_line
 from nurbsfeed.gcode.tokenizer import Block, Param, ParamKey, Word, code_name, tokenize_line
 from nurbsfeed.program import CurveBlock, PassThrough, ProgramItem
@@ -140,6 +142,11 @@ class _Reader:
                     if closed:
                         yield from self._close()
                     continue
+            if self.open is None:
+                moved = self._plain_move(line_text, line)
+                if moved is not None:
+                    yield moved
+                    continue
             block = self._tokenize(line_text, line)
             if self.open is not None:
                 if block.delimiter:
@@ -195,6 +202,29 @@ class _Reader:
             yield PassThrough(line_text, joins, joins and not block.is_inert)
         else:
             self.eol = block.eol or _line_ending(line_text)
+
+    def _plain_move(self, line_text: str, line: int) -> PassThrough | None:
+        """A plain straight move outside any NURBS block (gcode.plain_moves), executed as
+        `_outside` executes its block, which here opens no curve, is no spline and may join a
+        chain; None, having read nothing, for any other line, and under Sinumerik syntax, after
+        a G5 / G5.1 that left another motion mode, under another motion mode or a canned cycle
+        without a G word, or with a negative F (the general path words the error)."""
+        if self.dialect == "siemens" or self.spline_after is not None:
+            return None
+        read = plain_move(line_text, line)
+        if read is None:
+            return None
+        motion, axes, feed = read
+        state = self.state
+        if ((motion is None and (state.motion not in LINEAR_MODES or state.cycle is not None))
+                or (feed is not None and feed.value < 0.0)):
+            return None
+        before = self._motion_state()
+        state.apply_plain_move(motion, axes, feed)
+        if motion is not None or axes:  # `_moved`
+            self.g5_exit = None
+        joins = self._joins(before)
+        return PassThrough(line_text, joins, joins)
 
     def _motion_state(self) -> tuple[object, ...]:
         """What a line between two curves of a chain must leave as it was (PassThrough.joins):
