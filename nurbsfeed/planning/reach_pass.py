@@ -25,13 +25,15 @@ from nurbsfeed.planning.reach_sets import (
     FOCUS_REL,
     MAX_LEVELS,
     WIDE_PROBES,
-    _sublevel,
-    _superlevel,
+    b_top,
     chain_of,
     fold_end,
     levels,
     probes_around,
+    prune,
     split_rows,
+    sublevel,
+    superlevel,
 )
 
 END_REST, END_MOVING, END_MOVING_LOOSE = 0, 1, 2
@@ -41,28 +43,25 @@ U_TOL_REL = 1e-7  # an empty range of u narrower than this share of its size is 
 
 @jit
 def controllable(h, g0, gm, g1, b_knot, b_mid, floors, lims, end_kind, end_p1, end_p2, focus,
-                 focused, lower, top, lev_a, lev_hi, lev_lo, lev_n):
+                 focused, top, lev_a, lev_hi, lev_lo, lev_n):
     """The backward pass: every knot's levels (Q + 1, MAX_LEVELS) and their count (Q + 1,)
     (the last knot's are not needed: the end is folded into the last cell), from knot top
     down (the knots after it keep the levels they have). focused: probe each knot's set
     closely around the acceleration focus (Q + 1,) of a motion already found too (NaN where
-    none is). lower:
-    find each set's lower boundary too (else the rows' own bound on b stands for it: the
-    forward pass rides the upper one). Returns the knot whose set came out empty, -1 when
-    none did."""
+    none is). Returns the knot whose set came out empty, -1 when none did."""
     q_n = h.size
     rows = np.empty((ROWS_PER_CELL, 4))
     folded = np.empty((ROWS_PER_CELL + 2, 4))
-    cha = np.empty(MAX_LEVELS)
-    chg = np.empty(MAX_LEVELS)
-    chl = np.empty(MAX_LEVELS)
+    chain = np.empty((3, MAX_LEVELS))
+    idx = np.zeros(4, dtype=np.int64)
     probe_hi = np.empty(MAX_LEVELS * FINE_PROBES)
     probe_lo = np.empty(MAX_LEVELS * FINE_PROBES)
+    grid = np.empty(MAX_LEVELS * FINE_PROBES)
     probes = np.empty(WIDE_PROBES + FOCUS_PROBES)
     up = np.empty((ROWS_PER_CELL + 2, 3))
     down = np.empty((ROWS_PER_CELL + 2, 3))
-    fixed = np.empty((ROWS_PER_CELL + 2, 3))
-    work = np.empty((4, ROWS_PER_CELL + 2))
+    bounds = np.empty((ROWS_PER_CELL + 2, 3))
+    level = np.empty((4, ROWS_PER_CELL + 2))
     lev_n[q_n] = 0
     for j in range(top, -1, -1):
         n = cell_rows(g0[j], gm[j], g1[j], h[j], b_knot[j], b_mid[j], b_knot[j + 1], floors[j],
@@ -71,19 +70,25 @@ def controllable(h, g0, gm, g1, b_knot, b_mid, floors, lims, end_kind, end_p1, e
         here = focused and focus[j] == focus[j]  # (NaN: no motion known at this knot)
         p_n = probes_around(acc, WIDE_PROBES, FOCUS_PROBES if here else 0, focus[j],
                             FOCUS_REL * acc, probes)
+        nc, peak, valley = 0, 0, 0
         if j == q_n - 1:
             n = fold_end(rows, n, h[j], end_kind, end_p1, end_p2, folded)
-            nu, nd, nf = split_rows(folded, n, h[j], up, down, fixed)
-            m = levels((up, down, fixed, nu, nd, nf), h[j], cha, chg, chl, 0, 0, 0,
-                       probes[:p_n], acc, lev_a[j], lev_hi[j], lev_lo[j], probe_hi, probe_lo,
-                       work, lower)
+            nu, nd, nb, a_min, a_max = split_rows(folded, n, h[j], up, down, bounds)
         else:
-            nu, nd, nf = split_rows(rows, n, h[j], up, down, fixed)
+            nu, nd, nb, a_min, a_max = split_rows(rows, n, h[j], up, down, bounds)
             nc, peak, valley = chain_of(lev_a[j + 1], lev_hi[j + 1], lev_lo[j + 1],
-                                        lev_n[j + 1], h[j], cha, chg, chl)
-            m = levels((up, down, fixed, nu, nd, nf), h[j], cha, chg, chl, nc, peak, valley,
-                       probes[:p_n], acc, lev_a[j], lev_hi[j], lev_lo[j], probe_hi, probe_lo,
-                       work, lower)
+                                        lev_n[j + 1], h[j], chain, idx)
+        # the box this knot's set lies in, where the bounds on a1 are pruned
+        a_lo, a_hi = max(a_min, -acc), min(a_max, acc)
+        b_hi = b_top(bounds, nb, a_lo, a_hi)
+        if nc > 0:
+            b_hi = min(b_hi, chain[1, peak] - h[j] * a_lo)
+        if a_lo <= a_hi and 0.0 <= b_hi < np.inf:
+            nu = prune(up, nu, 1.0, a_lo, a_hi, b_hi)
+            nd = prune(down, nd, -1.0, a_lo, a_hi, b_hi)
+        m = levels((up, down, bounds, nu, nd, nb, a_min, a_max), h[j], chain, nc, peak, valley,
+                   probes[:p_n], acc, lev_a[j], lev_hi[j], lev_lo[j], probe_hi, probe_lo, grid,
+                   level, idx)
         lev_n[j] = m
         if m == 0:
             return j
@@ -171,9 +176,8 @@ def forward(h, g0, gm, g1, b_knot, b_mid, floors, lims, start_kind, start_p1, st
     the pass found no way on from."""
     q_n = h.size
     rows = np.empty((ROWS_PER_CELL, 4))
-    cha = np.empty(MAX_LEVELS)
-    chg = np.empty(MAX_LEVELS)
-    chl = np.empty(MAX_LEVELS)
+    chain = np.empty((3, MAX_LEVELS))
+    idx = np.zeros(4, dtype=np.int64)
     if start_kind == END_REST:
         slope = 2.0 / (3.0 * start_p1)
         b = _ray_start(lev_a[0], lev_hi[0], lev_lo[0], lev_n[0], slope, start_p2 * slope)
@@ -202,10 +206,10 @@ def forward(h, g0, gm, g1, b_knot, b_mid, floors, lims, start_kind, start_p1, st
                 return j
         else:
             nc, peak, valley = chain_of(lev_a[j + 1], lev_hi[j + 1], lev_lo[j + 1],
-                                        lev_n[j + 1], hj, cha, chg, chl)
-            c = min(b + hj * a, chg[peak])
-            lo1, hi1, _, _ = _superlevel(cha, chg, nc, peak, c)
-            lo2, hi2, _, _ = _sublevel(cha, chl, nc, valley, max(c, chl[valley]))
+                                        lev_n[j + 1], hj, chain, idx)
+            c = min(b + hj * a, chain[1, peak])
+            lo1, hi1, _, _ = superlevel(chain, 1, nc, peak, c, idx)
+            lo2, hi2, _, _ = sublevel(chain, 2, nc, valley, max(c, chain[2, valley]), idx)
             low = max(low, (max(lo1, lo2) - a) / hj)
             high = min(high, (min(hi1, hi2) - a) / hj)
             tol = U_TOL_REL * (abs(low) + abs(high) + 1.0)

@@ -37,9 +37,6 @@ from nurbsfeed.planning.schedule import BETWEEN_REL, Schedule, cell_times, stati
 
 STATIC_REACH = 2.0
 REST_REACH = 1.5
-COARSE = 1
-EXTRA_ROUNDS = 0
-LOWER = True
 FLOOR_SHARE = 0.9
 FLOOR_KEEP = 0.95
 SEED_KEEP = 0.995
@@ -62,7 +59,11 @@ def _reversed_geometry(g: np.ndarray) -> np.ndarray:
     return out
 
 
-def _levels(q_n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+Arrays4 = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+End = tuple[int, float, float]  # (kind, p1, p2): planning.reach_pass's ends
+
+
+def _levels(q_n: int) -> Arrays4:
     """Room for a stretch's sets: per knot (Q + 1,) the levels' accelerations, upper and lower
     boundaries (Q + 1, MAX_LEVELS) and their count."""
     n = q_n + 1
@@ -70,9 +71,9 @@ def _levels(q_n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
             np.zeros(n, dtype=np.int64))
 
 
-def _backward(geometry: tuple, lims: np.ndarray, floors: np.ndarray, lin_knot: np.ndarray,
-              lin_mid: np.ndarray, focus: np.ndarray | None, end: tuple
-              ) -> tuple[tuple, np.ndarray, np.ndarray, np.ndarray] | None:
+def _backward(geometry: Arrays4, lims: np.ndarray, floors: np.ndarray, lin_knot: np.ndarray,
+              lin_mid: np.ndarray, focus: np.ndarray | None, end: End
+              ) -> tuple[Arrays4, np.ndarray, np.ndarray, np.ndarray] | None:
     """The backward pass over a stretch (geometry = h, g0, gm, g1), with what it had to give
     up on its way: where a knot's set comes out empty, the first floors from there on (a run
     of FLOOR_WINDOW knots at most) ask more than the sets allow and are lowered (at last
@@ -90,7 +91,7 @@ def _backward(geometry: tuple, lims: np.ndarray, floors: np.ndarray, lin_knot: n
     top = q_n - 1
     while True:
         empty = controllable(*geometry, lin_knot, lin_mid, floors, lims, *end,
-                             focus if focused else lin_knot, focused, LOWER, top, *sets)
+                             focus if focused else lin_knot, focused, top, *sets)
         if empty < 0:
             return sets, floors, lin_knot, lin_mid
         start = empty
@@ -170,12 +171,9 @@ class _Stretch:
             # a while: the sets are probed closely around that acceleration there
             self.lin_focus = np.where(near & np.isnan(self.lin_focus), a, self.lin_focus)
 
-    def levels(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        return _levels(self.q_n)
-
     def plan(self, lims: np.ndarray, floors: np.ndarray, lin_knot: np.ndarray,
              lin_mid: np.ndarray, focus: np.ndarray | None = None
-             ) -> tuple[np.ndarray, np.ndarray, tuple] | None:
+             ) -> tuple[np.ndarray, np.ndarray, Arrays4] | None:
         """Backward and forward pass: the motion (b, a) at the knots and the sets; None where
         a set came out empty or the forward pass found no way on. focus: the acceleration
         (Q + 1,) of a motion found before, where the sets are probed closely."""
@@ -192,10 +190,10 @@ class _Stretch:
         return b, a, sets
 
     def reachable(self, lims: np.ndarray, lin_knot: np.ndarray, lin_mid: np.ndarray
-                  ) -> tuple | None:
+                  ) -> Arrays4 | None:
         """The sets of the stretch run backwards: the states reachable from its start."""
-        end = self.start if self.start[0] == END_REST else (END_MOVING_LOOSE, self.start[1],
-                                                             -self.start[2])
+        end: End = self.start if self.start[0] == END_REST else (
+            END_MOVING_LOOSE, self.start[1], -self.start[2])
         geometry = (np.ascontiguousarray(self.h[::-1]), _reversed_geometry(self.g1),
                     _reversed_geometry(self.gm), _reversed_geometry(self.g0))
         made = _backward(geometry, np.ascontiguousarray(lims[::-1]), np.zeros(self.q_n + 1),
@@ -222,77 +220,30 @@ def _mid_values(h: np.ndarray, b: np.ndarray, a: np.ndarray) -> np.ndarray:
     return b[:-1] + h * a[:-1] + 0.25 * h * h * u
 
 
-def _coarse_limits(lims: np.ndarray, q_n: int, step: int) -> np.ndarray:
-    """Per coarse cell: the loosest limits of the fine cells it merges (the guide only)."""
-    starts = np.arange(0, q_n, step)
-    return np.ascontiguousarray(np.maximum.reduceat(lims, starts, axis=0))
-
-
-def _coarse(st: _Stretch, step: int) -> tuple[_Stretch, np.ndarray]:
-    """The stretch on every step-th knot (its cells merged), and the fine knots' arc lengths
-    from the start (Q + 1,) with the coarse knots' positions among them."""
-    q_n = st.q_n
-    starts = np.arange(0, q_n, step)
-    ends = np.minimum(starts + step, q_n)
-    co = object.__new__(_Stretch)
-    co.first, co.last, co.q0 = st.first, st.last, st.q0
-    co.q_n = starts.size
-    s = np.concatenate(([0.0], np.cumsum(st.h)))
-    co.h = s[ends] - s[starts]
-    co.g0 = np.ascontiguousarray(st.g0[starts])
-    co.g1 = np.ascontiguousarray(st.g1[ends - 1])
-    m = ends - starts
-    mid_cell = starts + (m - 1) // 2
-    even = m % 2 == 0
-    co.gm = np.ascontiguousarray(np.where(even[:, None], st.g1[mid_cell], st.gm[mid_cell]))
-    knots = np.append(starts, q_n)
-    co.lin_knot = np.ascontiguousarray(st.lin_knot[knots])
-    co.lin_mid = np.ascontiguousarray(np.where(even, st.lin_knot[mid_cell + 1],
-                                               st.lin_mid[mid_cell]))
-    co.lin_focus = np.ascontiguousarray(st.lin_focus[knots])
-    co.start, co.end = st.start, st.end
-    return co, s
-
-
 def _plan_stretch(st: _Stretch, lims: np.ndarray) -> tuple[np.ndarray, np.ndarray, int] | None:
     """The motion of one stretch (module docstring): (b, a) at its knots and the passes run."""
     no_floor = np.zeros(st.q_n + 1)
-    co, s = _coarse(st, COARSE) if COARSE > 1 else (st, None)
-    co_lims = lims if co is st else _coarse_limits(lims, st.q_n, COARSE)
-    first = co.plan(co_lims, np.zeros(co.q_n + 1), co.lin_knot, co.lin_mid,
-                    co.lin_focus if np.any(co.lin_focus == co.lin_focus) else None)
+    known = np.any(st.lin_focus == st.lin_focus)
+    first = st.plan(lims, no_floor, st.lin_knot, st.lin_mid, st.lin_focus if known else None)
     if first is None:
         return None
     b1, a1, k_sets = first
     passes = 2
-    bound = None
-    r_sets = co.reachable(co_lims, co.lin_knot, co.lin_mid)
+    floors = st.seed_floor.copy()
+    r_sets = st.reachable(lims, st.lin_knot, st.lin_mid)
     if r_sets is not None:
         passes += 1
-        bound = np.empty(co.q_n + 1)
+        bound = np.empty(st.q_n + 1)
         highest(*k_sets, *r_sets, bound)
-    if s is not None:
-        # the coarse motion at the fine knots (each coarse cell's quadratic), the bound
-        # between the coarse knots linearly
-        sk = s[np.append(np.arange(0, st.q_n, COARSE), st.q_n)]
-        cell = np.clip(np.searchsorted(sk, s, side="right") - 1, 0, co.q_n - 1)
-        x = s - sk[cell]
-        u = np.diff(a1) / co.h
-        b1, a1 = b1[cell] + x * (2.0 * a1[cell] + u[cell] * x), a1[cell] + u[cell] * x
-        if bound is not None:
-            bound = np.interp(s, sk, bound)
-    floors = st.seed_floor.copy()
-    if bound is not None:
         floors = np.maximum(floors, np.where(b1 < FLOOR_SHARE * bound, FLOOR_KEEP * bound, 0.0))
     floors[0] = floors[-1] = 0.0
     lin_knot = np.maximum(np.maximum(b1, floors), B_FLOOR)
     lin_mid = np.maximum(np.maximum(_mid_values(st.h, b1, a1),
                                     0.5 * (floors[1:] + floors[:-1])), B_FLOOR)
-    best = None
-    if s is None:
-        best = (b1, a1, st.time(b1, a1))
+    best = (b1, a1, st.time(b1, a1))
     # probed around the first motion, and around a seed's (the plan this one takes over
-    # from) where there is one: the motion it continues rides those boundaries
+    # from) where there is one: the motion it continues rides those boundaries; where the
+    # floors leave no motion, the pass runs again without them
     focus = np.where(np.isnan(st.lin_focus), a1, st.lin_focus)
     for f in ((floors, no_floor) if floors.any() else (no_floor,)):
         passes += 2
@@ -300,21 +251,9 @@ def _plan_stretch(st: _Stretch, lims: np.ndarray) -> tuple[np.ndarray, np.ndarra
         if again is None:
             continue
         t = st.time(again[0], again[1])
-        if best is None or t < best[2]:
-            best = (again[0], again[1], t)
-        break
-    if best is None:
-        return None
-    for _ in range(EXTRA_ROUNDS):
-        b2, a2 = best[0], best[1]
-        passes += 2
-        again = st.plan(lims, floors, np.maximum(b2, B_FLOOR),
-                        np.maximum(_mid_values(st.h, b2, a2), B_FLOOR), a2)
-        if again is None:
-            break
-        t = st.time(again[0], again[1])
         if t < best[2]:
             best = (again[0], again[1], t)
+        break
     return best[0], best[1], passes
 
 

@@ -13,16 +13,16 @@ approximation, so that a state inside it has a way on. Going back from knot j + 
 
 For one level a the question is one-dimensional in b. With a1 = a + h u the next state is
 (b + h (a + a1), a1), so it lies in K_j+1 when gamma(a1) >= b + h a >= gamma_lo(a1), with
-gamma = (upper boundary of K_j+1) - h a1, concave, and gamma_lo likewise, convex; cell j's rows
-keep a1 between affine functions of b. The gap between the least upper and the greatest lower
-bound on a1 is concave in b: Newton's method on it from outside the feasible interval reaches
-its ends without crossing them (`_level`). The levels of a knot span the accelerations its set
-reaches: probed at evenly spaced accelerations, the ends found by bisection (`levels`).
+gamma = (upper boundary of K_j+1) - h a1, concave, and gamma_lo likewise, convex (the *chain*
+the knot reads); cell j's rows keep a1 between affine functions of b. The gap between the
+least upper and the greatest lower bound on a1 is concave in b: Newton's method on it from
+outside the feasible interval reaches its ends without crossing them (`_upper_end`), started
+from the next knot's boundary at the same acceleration (the sets change little from one knot
+to the next). The levels of a knot span the accelerations its set reaches: probed at given
+accelerations, the ends found by bisection (`levels`).
 """
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 
@@ -35,13 +35,13 @@ WIDE_PROBES = 12  # accelerations every set is probed at, evenly over [-A_t, A_t
 FOCUS_PROBES = 12
 FOCUS_REL = 0.15
 MAX_LEVELS = WIDE_PROBES + FOCUS_PROBES + 2
+FINE_PROBES = 8  # times as many probes, evenly, where none meets the set
 NEWTON_STEPS = 40
 BISECTIONS = 50  # where Newton's method meets a kink it cannot step over
 # a first guess from the next knot's set starts this share outside it (a boundary moves
 # less than that from one knot to the next, mostly)
 WARM_REL = 5e-3
 RANGE_TOL_REL = 2e-3  # of the acceleration scale: how closely a set's range ends are found
-FINE_PROBES = 8  # times LEVELS probes where no coarse probe meets the set
 ROUNDING_REL = 1e-12  # of b: where the chain's peak is met exactly, rounding aside
 GAP_TOL_REL = 1e-9  # of the acceleration scale: a gap this far below 0 still counts as met
 # the stored boundaries move this share of b into the set: the forward pass lands on them, and
@@ -55,134 +55,217 @@ LOOSE_END_REL = 1e-3
 
 
 @jit
-def split_rows(rows, n, h, up, down, fixed):
-    """A cell's rows split for the levels: a row with u bounds a1 = a + h u by p + q a + s b
-    (from above where its u coefficient is positive, into up (U, 3); from below, into down
-    (D, 3)), one without u bounds b at each a, into fixed (F, 3) as (cb, ca, d). Returns
-    (U, D, F)."""
+def split_rows(rows, n, h, up, down, bounds):
+    """A cell's rows (n, 4) (cb b + ca a + cu u <= d) arranged for the levels: a row with u
+    bounds a1 = a + h u by p + q a + s b, from above where its u coefficient is positive
+    (into up (U, 3) as (p, q, s)), from below where negative (into down); a row without u
+    bounds b by alpha + beta a (into bounds (B, 3) as (sign, alpha, beta): sign 1 above,
+    -1 below) or a alone. Returns (U, D, B, a_min, a_max): the range of a the last ones
+    leave (a_min > a_max: none)."""
     nu = 0
     nd = 0
-    nf = 0
+    nb = 0
+    a_min = -np.inf
+    a_max = np.inf
     for r in range(n):
-        cu = rows[r, 2]
-        if cu == 0.0:
-            fixed[nf, 0] = rows[r, 0]
-            fixed[nf, 1] = rows[r, 1]
-            fixed[nf, 2] = rows[r, 3]
-            nf += 1
-            continue
-        p = h * rows[r, 3] / cu
-        q = 1.0 - h * rows[r, 1] / cu
-        s = -h * rows[r, 0] / cu
-        if cu > 0.0:
-            up[nu, 0], up[nu, 1], up[nu, 2] = p, q, s
-            nu += 1
-        else:
-            down[nd, 0], down[nd, 1], down[nd, 2] = p, q, s
-            nd += 1
-    return nu, nd, nf
+        cb, ca, cu, d = rows[r, 0], rows[r, 1], rows[r, 2], rows[r, 3]
+        if cu != 0.0:
+            p = h * d / cu
+            q = 1.0 - h * ca / cu
+            s = -h * cb / cu
+            if cu > 0.0:
+                up[nu, 0], up[nu, 1], up[nu, 2] = p, q, s
+                nu += 1
+            else:
+                down[nd, 0], down[nd, 1], down[nd, 2] = p, q, s
+                nd += 1
+        elif cb != 0.0:
+            bounds[nb, 0] = 1.0 if cb > 0.0 else -1.0
+            bounds[nb, 1] = d / cb
+            bounds[nb, 2] = -ca / cb
+            nb += 1
+        elif ca > 0.0:
+            a_max = min(a_max, d / ca)
+        elif ca < 0.0:
+            a_min = max(a_min, d / ca)
+        elif d < -GAP_TOL_REL * abs(d):
+            a_min, a_max = 1.0, -1.0
+    return nu, nd, nb, a_min, a_max
 
 
 @jit
-def _b_bounds(fixed, nf, a):
-    """Per level a: the bounds on b of the rows without u (cap, floors, ...): (low, high, ok)."""
+def _box_value(rows, r, sign, a, b):
+    return sign * (rows[r, 0] + rows[r, 1] * a + rows[r, 2] * b)
+
+
+@jit
+def prune(rows, n, sign, a_lo, a_hi, b_hi):
+    """Drops the bounds on a1 (rows (n, 3) as `split_rows` gives them: from above with sign 1,
+    from below with sign -1) that another one is tighter than everywhere in the box a in
+    [a_lo, a_hi], b in [0, b_hi] (where this knot's set lies), keeping the order of the rest;
+    returns their count. Of some 19 bounds a side a cell's set meets some 5: every level reads
+    them all a few times. A bound is linear, so one tighter at the box's corners is tighter
+    all over it; the bounds tried as the tighter one are those tightest at a corner or the
+    middle (each of them stays)."""
+    if n <= 1:
+        return n
+    corners_a = (a_lo, a_lo, a_hi, a_hi, 0.5 * (a_lo + a_hi))
+    corners_b = (0.0, b_hi, 0.0, b_hi, 0.5 * b_hi)
+    best = np.empty(5, dtype=np.int64)
+    for c in range(5):
+        k = 0
+        for r in range(1, n):
+            if _box_value(rows, r, sign, corners_a[c], corners_b[c]) < _box_value(
+                    rows, k, sign, corners_a[c], corners_b[c]):
+                k = r
+        best[c] = k
+    m = 0
+    for r in range(n):
+        dominated = False
+        for c in range(5):
+            k = best[c]
+            if k == r:
+                dominated = False
+                break
+            if not dominated:
+                tighter = True
+                for e in range(4):
+                    if not _box_value(rows, k, sign, corners_a[e], corners_b[e]) <= _box_value(
+                            rows, r, sign, corners_a[e], corners_b[e]):
+                        tighter = False
+                        break
+                dominated = tighter
+        if not dominated:
+            for i in range(3):
+                rows[m, i] = rows[r, i]
+            m += 1
+    return m
+
+
+@jit
+def b_top(bounds, nb, a_lo, a_hi):
+    """An upper bound on b over a in [a_lo, a_hi] from the rows without u (inf: none)."""
+    top = np.inf
+    for r in range(nb):
+        if bounds[r, 0] > 0.0:
+            top = min(top, bounds[r, 1] + max(bounds[r, 2] * a_lo, bounds[r, 2] * a_hi))
+    return top
+
+
+@jit
+def _b_bounds(bounds, nb, a):
+    """The bounds on b of the rows without u at acceleration a: (low, high)."""
     low = 0.0
     high = np.inf
-    for r in range(nf):
-        cb = fixed[r, 0]
-        d = fixed[r, 2] - fixed[r, 1] * a
-        if cb > 0.0:
-            high = min(high, d / cb)
-        elif cb < 0.0:
-            low = max(low, d / cb)
-        elif d < -GAP_TOL_REL * (abs(fixed[r, 2]) + abs(fixed[r, 1] * a)):
-            return low, high, False
-    return low, high, True
+    for r in range(nb):
+        v = bounds[r, 1] + bounds[r, 2] * a
+        if bounds[r, 0] > 0.0:
+            high = min(high, v)
+        else:
+            low = max(low, v)
+    return low, high
 
 
 @jit
-def _superlevel(cha, chg, n, peak, c):
-    """The interval [lo, hi] of a1 where the concave chain (cha, chg) (n points, highest at
-    peak) is >= c, and d lo / dc, d hi / dc. Empty (lo > hi) when its peak is below c. Each
-    end is interpolated from the point inside it, so that c at the peak gives the peak's a1
-    exactly on both sides."""
-    if chg[peak] < c:
+def superlevel(chain, row, n, peak, c, idx):
+    """The interval [lo, hi] of a1 where the concave chain (chain[0], chain[row]) (n points,
+    highest at peak) is >= c, and d lo / dc, d hi / dc; empty (lo > hi) when its peak is below
+    c. Each end is found from where it was last (idx[0], idx[1]: the sets' boundaries move
+    little between the evaluations of one knot) and interpolated from the point inside it, so
+    that c at the peak gives the peak's a1 exactly on both sides. (The chain is indexed, never
+    sliced: a slice's reference count costs more than the search.)"""
+    if chain[row, peak] < c:
         return 1.0, -1.0, 0.0, 0.0
-    k = peak
-    while k > 0 and chg[k - 1] >= c:
-        k -= 1
-    if k == 0:
-        lo, dlo = cha[0], 0.0
-    else:
-        slope = (cha[k] - cha[k - 1]) / (chg[k] - chg[k - 1])
-        lo, dlo = cha[k] - (chg[k] - c) * slope, slope
-    k = peak
-    while k < n - 1 and chg[k + 1] >= c:
+    k = min(max(idx[0], 0), peak)
+    while k < peak and chain[row, k] < c:
         k += 1
-    if k == n - 1:
-        hi, dhi = cha[n - 1], 0.0
+    while k > 0 and chain[row, k - 1] >= c:
+        k -= 1
+    idx[0] = k
+    if k == 0:
+        lo, dlo = chain[0, 0], 0.0
     else:
-        slope = (cha[k + 1] - cha[k]) / (chg[k + 1] - chg[k])
-        hi, dhi = cha[k] + (c - chg[k]) * slope, slope
+        slope = (chain[0, k] - chain[0, k - 1]) / (chain[row, k] - chain[row, k - 1])
+        lo, dlo = chain[0, k] - (chain[row, k] - c) * slope, slope
+    k = min(max(idx[1], peak), n - 1)
+    while k > peak and chain[row, k] < c:
+        k -= 1
+    while k < n - 1 and chain[row, k + 1] >= c:
+        k += 1
+    idx[1] = k
+    if k == n - 1:
+        hi, dhi = chain[0, n - 1], 0.0
+    else:
+        slope = (chain[0, k + 1] - chain[0, k]) / (chain[row, k + 1] - chain[row, k])
+        hi, dhi = chain[0, k] + (c - chain[row, k]) * slope, slope
     return lo, hi, dlo, dhi
 
 
 @jit
-def _sublevel(cha, chl, n, valley, c):
-    """The interval of a1 where the convex chain (cha, chl) (lowest at valley) is <= c, ends
-    interpolated from inside as in `_superlevel`."""
-    if chl[valley] > c:
+def sublevel(chain, row, n, valley, c, idx):
+    """The interval of a1 where the convex chain (chain[0], chain[row]) (lowest at valley) is
+    <= c, as `superlevel` (its ends' last places in idx[2], idx[3])."""
+    if chain[row, valley] > c:
         return 1.0, -1.0, 0.0, 0.0
-    k = valley
-    while k > 0 and chl[k - 1] <= c:
-        k -= 1
-    if k == 0:
-        lo, dlo = cha[0], 0.0
-    else:
-        slope = (cha[k] - cha[k - 1]) / (chl[k] - chl[k - 1])
-        lo, dlo = cha[k] - (chl[k] - c) * slope, slope
-    k = valley
-    while k < n - 1 and chl[k + 1] <= c:
+    k = min(max(idx[2], 0), valley)
+    while k < valley and chain[row, k] > c:
         k += 1
-    if k == n - 1:
-        hi, dhi = cha[n - 1], 0.0
+    while k > 0 and chain[row, k - 1] <= c:
+        k -= 1
+    idx[2] = k
+    if k == 0:
+        lo, dlo = chain[0, 0], 0.0
     else:
-        slope = (cha[k + 1] - cha[k]) / (chl[k + 1] - chl[k])
-        hi, dhi = cha[k] + (c - chl[k]) * slope, slope
+        slope = (chain[0, k] - chain[0, k - 1]) / (chain[row, k] - chain[row, k - 1])
+        lo, dlo = chain[0, k] - (chain[row, k] - c) * slope, slope
+    k = min(max(idx[3], valley), n - 1)
+    while k > valley and chain[row, k] > c:
+        k -= 1
+    while k < n - 1 and chain[row, k + 1] <= c:
+        k += 1
+    idx[3] = k
+    if k == n - 1:
+        hi, dhi = chain[0, n - 1], 0.0
+    else:
+        slope = (chain[0, k + 1] - chain[0, k]) / (chain[row, k + 1] - chain[row, k])
+        hi, dhi = chain[0, k] + (c - chain[row, k]) * slope, slope
     return lo, hi, dlo, dhi
 
 
 @jit
-def _gap(wu, su, nu, wd, sd, nd, a, b, h, cha, chg, chl, nc, peak, valley):
+def _gap(level, nu, nd, a, b, h, chain, nc, peak, valley, idx):
     """The least upper bound on a1 minus the greatest lower one at state (b, a), and its slope
-    in b (the gap is concave in b: its feasible b are an interval). wu, su (U,): the upper
-    bounds' values at b = 0 at this level and their slopes in b; wd, sd likewise."""
+    in b (concave in b: its feasible b are an interval). level (4, R): the upper bounds'
+    values at b = 0 at this level and their slopes in b, the lower bounds' likewise; chain
+    (3, L): the next knot's levels' a1, gamma and gamma_lo (nc of them; none for the last
+    cell, whose u the end fixes)."""
     up = np.inf
     up_slope = 0.0
     for r in range(nu):
-        value = wu[r] + su[r] * b
+        value = level[0, r] + level[1, r] * b
         if value < up:
-            up, up_slope = value, su[r]
+            up, up_slope = value, level[1, r]
     dn = -np.inf
     dn_slope = 0.0
     for r in range(nd):
-        value = wd[r] + sd[r] * b
+        value = level[2, r] + level[3, r] * b
         if value > dn:
-            dn, dn_slope = value, sd[r]
+            dn, dn_slope = value, level[3, r]
     if nc == 0:
         return up - dn, up_slope - dn_slope
     c = b + h * a
-    rounding = ROUNDING_REL * (abs(c) + abs(chg[peak]) + abs(chl[valley]))
-    lo, hi, dlo, dhi = _superlevel(cha, chg, nc, peak, min(c, chg[peak]) if c - chg[peak]
-                                   <= rounding else c)
+    top, bottom = chain[1, peak], chain[2, valley]
+    rounding = ROUNDING_REL * (abs(c) + abs(top) + abs(bottom))
+    lo, hi, dlo, dhi = superlevel(chain, 1, nc, peak, min(c, top) if c - top <= rounding
+                                   else c, idx)
     if lo > hi:
         return -np.inf, -1.0
     if hi < up:
         up, up_slope = hi, dhi
     if lo > dn:
         dn, dn_slope = lo, dlo
-    lo, hi, dlo, dhi = _sublevel(cha, chl, nc, valley, max(c, chl[valley]) if chl[valley] - c
-                                 <= rounding else c)
+    lo, hi, dlo, dhi = sublevel(chain, 2, nc, valley, max(c, bottom) if bottom - c
+                                 <= rounding else c, idx)
     if lo > hi:
         return -np.inf, 1.0
     if hi < up:
@@ -193,11 +276,11 @@ def _gap(wu, su, nu, wd, sd, nd, a, b, h, cha, chg, chl, nc, peak, valley):
 
 
 @jit
-def _bisect(wu, su, nu, wd, sd, nd, a, h, cha, chg, chl, nc, peak, valley, good, bad, tol):
+def _bisect(level, nu, nd, a, h, chain, nc, peak, valley, idx, good, bad, tol):
     """The end of the feasible interval between a feasible b (good) and an infeasible one."""
     for _ in range(BISECTIONS):
         mid = 0.5 * (good + bad)
-        gap, _ = _gap(wu, su, nu, wd, sd, nd, a, mid, h, cha, chg, chl, nc, peak, valley)
+        gap, _ = _gap(level, nu, nd, a, mid, h, chain, nc, peak, valley, idx)
         if gap >= -tol:
             good = mid
         else:
@@ -206,123 +289,115 @@ def _bisect(wu, su, nu, wd, sd, nd, a, h, cha, chg, chl, nc, peak, valley, good,
 
 
 @jit
-def _upper_end(wu, su, nu, wd, sd, nd, a, h, cha, chg, chl, nc, peak, valley, low, high, b,
-               tol):
+def _upper_end(level, nu, nd, a, h, chain, nc, peak, valley, idx, low, high, b, tol):
     """The greatest feasible b in [low, high], by Newton's method inward from b (the tangent
     of the concave gap lies above it: from outside it never steps past the end), and where b
     turns out feasible, or below the feasible interval, from high; bisection against low
     where a kink leaves Newton no step. -1 where no b in [low, high] is feasible."""
-    gap, slope = _gap(wu, su, nu, wd, sd, nd, a, b, h, cha, chg, chl, nc, peak, valley)
+    gap, slope = _gap(level, nu, nd, a, b, h, chain, nc, peak, valley, idx)
     if b < high and (gap >= -tol or slope > 0.0):
         b = high
-        gap, slope = _gap(wu, su, nu, wd, sd, nd, a, b, h, cha, chg, chl, nc, peak, valley)
+        gap, slope = _gap(level, nu, nd, a, b, h, chain, nc, peak, valley, idx)
     for _ in range(NEWTON_STEPS):
         if gap >= -tol:
             return b
         step = b - gap / slope if slope < 0.0 and gap > -np.inf else low
         if step <= low:
-            gap, _ = _gap(wu, su, nu, wd, sd, nd, a, low, h, cha, chg, chl, nc, peak, valley)
+            gap, _ = _gap(level, nu, nd, a, low, h, chain, nc, peak, valley, idx)
             if gap < -tol:
                 return -1.0
-            return _bisect(wu, su, nu, wd, sd, nd, a, h, cha, chg, chl, nc, peak, valley, low,
-                           b, tol)
+            return _bisect(level, nu, nd, a, h, chain, nc, peak, valley, idx, low, b, tol)
         b = step
-        gap, slope = _gap(wu, su, nu, wd, sd, nd, a, b, h, cha, chg, chl, nc, peak, valley)
+        gap, slope = _gap(level, nu, nd, a, b, h, chain, nc, peak, valley, idx)
     return -1.0
 
 
 @jit
-def _lower_end(wu, su, nu, wd, sd, nd, a, h, cha, chg, chl, nc, peak, valley, low, top, b,
-               tol):
+def _lower_end(level, nu, nd, a, h, chain, nc, peak, valley, idx, low, top, b, tol):
     """The least feasible b in [low, top] (top feasible), as `_upper_end` mirrored: Newton's
     method from b upward, from low where b turns out feasible or above the interval."""
-    gap, slope = _gap(wu, su, nu, wd, sd, nd, a, b, h, cha, chg, chl, nc, peak, valley)
+    gap, slope = _gap(level, nu, nd, a, b, h, chain, nc, peak, valley, idx)
     if b > low and (gap >= -tol or slope < 0.0):
         b = low
-        gap, slope = _gap(wu, su, nu, wd, sd, nd, a, b, h, cha, chg, chl, nc, peak, valley)
+        gap, slope = _gap(level, nu, nd, a, b, h, chain, nc, peak, valley, idx)
     for _ in range(NEWTON_STEPS):
         if gap >= -tol:
             return b
         step = b - gap / slope if slope > 0.0 and gap > -np.inf else top
         if step >= top:
-            return _bisect(wu, su, nu, wd, sd, nd, a, h, cha, chg, chl, nc, peak, valley, top,
-                           b, tol)
+            return _bisect(level, nu, nd, a, h, chain, nc, peak, valley, idx, top, b, tol)
         b = step
-        gap, slope = _gap(wu, su, nu, wd, sd, nd, a, b, h, cha, chg, chl, nc, peak, valley)
+        gap, slope = _gap(level, nu, nd, a, b, h, chain, nc, peak, valley, idx)
     return top
 
 
 @jit
-def _guess(cha, chv, nc, h, a):
-    """The next knot's boundary (chain values chv = boundary - h a1) at acceleration a: the
-    first guess of this knot's (the sets change little from knot to knot); -1 outside it."""
-    if nc == 0 or a < cha[0] or a > cha[nc - 1]:
+def _guess(chain, row, nc, h, a):
+    """The next knot's boundary (chain[row] = boundary - h a1) at acceleration a: the first
+    guess of this knot's; -1 outside it."""
+    if nc == 0 or a < chain[0, 0] or a > chain[0, nc - 1]:
         return -1.0
     k = 0
-    while k < nc - 2 and cha[k + 1] < a:
+    while k < nc - 2 and chain[0, k + 1] < a:
         k += 1
-    if nc == 1 or cha[k + 1] <= cha[k]:
-        return chv[k] + h * a
-    w = (a - cha[k]) / (cha[k + 1] - cha[k])
-    return (1.0 - w) * chv[k] + w * chv[k + 1] + h * a
+    if nc == 1 or chain[0, k + 1] <= chain[0, k]:
+        return chain[row, k] + h * a
+    w = (a - chain[0, k]) / (chain[0, k + 1] - chain[0, k])
+    return (1.0 - w) * chain[row, k] + w * chain[row, k + 1] + h * a
 
 
 @jit
-def _level(cell, a, h, cha, chg, chl, nc, peak, valley, scale, work, lower):
+def _level(cell, a, h, chain, nc, peak, valley, scale, level, idx):
     """(high, low): the greatest and least b at acceleration a from which the cell's rows lead
-    into the next knot's set, the chain (cha, chg, chl) of its levels (gamma and gamma_lo,
-    above); INFEASIBLE twice where none does. cell = (up, down, fixed, nu, nd, nf): the rows
-    as `split_rows` gives them; work (4, U): scratch. Without a chain (nc = 0, the last
-    cell, its u fixed by the end: `fold_end`) the rows bound b alone. Each end by Newton's
-    method from the next knot's boundary at a (`_upper_end`). lower: the least b too (else
-    only what the rows without u bound it by)."""
-    up, down, fixed, nu, nd, nf = cell
-    low, high, ok = _b_bounds(fixed, nf, a)
-    if not ok or low > high:
+    into the next knot's set; INFEASIBLE twice where none does. cell = (up, down, bounds, U,
+    D, B, a_min, a_max) as `split_rows` gives them; level (4, R): scratch."""
+    up, down, bounds, nu, nd, nb, a_min, a_max = cell
+    if a < a_min or a > a_max:
+        return INFEASIBLE, INFEASIBLE
+    low, high = _b_bounds(bounds, nb, a)
+    if low > high:
         return INFEASIBLE, INFEASIBLE
     if nc == 0 and nu + nd == 0:
         return high, low
-    wu, su, wd, sd = work[0], work[1], work[2], work[3]
     for r in range(nu):
-        wu[r] = up[r, 0] + up[r, 1] * a
-        su[r] = up[r, 2]
+        level[0, r] = up[r, 0] + up[r, 1] * a
+        level[1, r] = up[r, 2]
     for r in range(nd):
-        wd[r] = down[r, 0] + down[r, 1] * a
-        sd[r] = down[r, 2]
+        level[2, r] = down[r, 0] + down[r, 1] * a
+        level[3, r] = down[r, 2]
     tol = GAP_TOL_REL * scale
     if nc > 0:
-        high = min(high, chg[peak] - h * a)
-        low = max(low, chl[valley] - h * a)
+        high = min(high, chain[1, peak] - h * a)
+        low = max(low, chain[2, valley] - h * a)
     if low > high:
         return INFEASIBLE, INFEASIBLE
-    guess = _guess(cha, chg, nc, h, a)
+    guess = _guess(chain, 1, nc, h, a)
     start = high if guess < 0.0 else min(max(guess * (1.0 + WARM_REL), low), high)
-    top = _upper_end(wu, su, nu, wd, sd, nd, a, h, cha, chg, chl, nc, peak, valley, low, high,
-                     start, tol)
+    top = _upper_end(level, nu, nd, a, h, chain, nc, peak, valley, idx, low, high, start, tol)
     if top < 0.0:
         return INFEASIBLE, INFEASIBLE
-    if not lower:
-        return top, min(low, top)
-    guess = _guess(cha, chl, nc, h, a)
+    guess = _guess(chain, 2, nc, h, a)
     start = low if guess < 0.0 else min(max(guess * (1.0 - WARM_REL), low), top)
-    return top, _lower_end(wu, su, nu, wd, sd, nd, a, h, cha, chg, chl, nc, peak, valley, low,
-                           top, start, tol)
+    return top, _lower_end(level, nu, nd, a, h, chain, nc, peak, valley, idx, low, top, start,
+                           tol)
 
 
 @jit
-def chain_of(lev_a, lev_hi, lev_lo, count, h, cha, chg, chl):
-    """A knot's levels as the chain the knot before it reads over a cell h long: gamma (chg)
-    and gamma_lo (chl) at the accelerations cha. Returns (count, peak, valley)."""
+def chain_of(lev_a, lev_hi, lev_lo, count, h, chain, idx):
+    """A knot's levels as the chain the knot before it reads over a cell h long, into chain
+    (3, L): a1, gamma and gamma_lo. Returns (count, peak, valley); idx (4,) starts at them."""
     peak = 0
     valley = 0
     for k in range(count):
-        cha[k] = lev_a[k]
-        chg[k] = lev_hi[k] - h * lev_a[k]
-        chl[k] = lev_lo[k] - h * lev_a[k]
-        if chg[k] > chg[peak]:
+        chain[0, k] = lev_a[k]
+        chain[1, k] = lev_hi[k] - h * lev_a[k]
+        chain[2, k] = lev_lo[k] - h * lev_a[k]
+        if chain[1, k] > chain[1, peak]:
             peak = k
-        if chl[k] < chl[valley]:
+        if chain[2, k] < chain[2, valley]:
             valley = k
+    idx[0] = idx[1] = peak
+    idx[2] = idx[3] = valley
     return count, peak, valley
 
 
@@ -340,14 +415,14 @@ def _store(lev_a, lev_hi, lev_lo, m, a, high, low):
 
 
 @jit
-def _probe(cell, h, cha, chg, chl, nc, peak, valley, probes, count, scale, probe_hi,
-           probe_lo, work, lower):
-    """The sets' levels at probes[:count] (ascending): (first, last) feasible ones (-1: none).
-    The set is convex: the first infeasible probe after a feasible one ends the run."""
+def _probe(cell, h, chain, nc, peak, valley, probes, count, scale, probe_hi, probe_lo, level,
+           idx):
+    """The set at probes[:count] (ascending): (first, last) feasible ones (-1: none). The set
+    is convex: the first infeasible probe after a feasible one ends the run."""
     first = -1
     last = -1
     for k in range(count):
-        hi, lo = _level(cell, probes[k], h, cha, chg, chl, nc, peak, valley, scale, work, lower)
+        hi, lo = _level(cell, probes[k], h, chain, nc, peak, valley, scale, level, idx)
         probe_hi[k] = hi
         probe_lo[k] = lo
         if hi >= 0.0:
@@ -360,14 +435,29 @@ def _probe(cell, h, cha, chg, chl, nc, peak, valley, probes, count, scale, probe
 
 
 @jit
-def _refine(cell, h, cha, chg, chl, nc, peak, valley, inside, outside, hi, lo, scale, work,
-            lower):
+def _refine(cell, h, chain, nc, peak, valley, inside, outside, hi, lo, guess, scale, level,
+            idx):
     """The acceleration range's end between a feasible probe (inside, with its hi and lo)
-    and an infeasible one: (a, hi, lo) of the last feasible point bisection finds, to
-    RANGE_TOL_REL of the acceleration scale."""
-    while abs(outside - inside) > RANGE_TOL_REL * scale:
+    and an infeasible one: (a, hi, lo) of the last feasible point found, to RANGE_TOL_REL of
+    the acceleration scale. guess: where the next knot's range ends, first tried with a
+    point just beyond it (the ends move little from knot to knot)."""
+    tol = RANGE_TOL_REL * scale
+    lo_end, hi_end = min(inside, outside), max(inside, outside)
+    if lo_end < guess < hi_end:
+        toward = 1.0 if outside > inside else -1.0
+        for a in (guess, guess + toward * 2.0 * tol):
+            if not lo_end < a < hi_end:
+                continue
+            mh, ml = _level(cell, a, h, chain, nc, peak, valley, scale, level, idx)
+            if mh >= 0.0:
+                inside, hi, lo = a, mh, ml
+            else:
+                outside = a
+                break
+            lo_end, hi_end = min(inside, outside), max(inside, outside)
+    while abs(outside - inside) > tol:
         mid = 0.5 * (inside + outside)
-        mh, ml = _level(cell, mid, h, cha, chg, chl, nc, peak, valley, scale, work, lower)
+        mh, ml = _level(cell, mid, h, chain, nc, peak, valley, scale, level, idx)
         if mh >= 0.0:
             inside, hi, lo = mid, mh, ml
         else:
@@ -376,45 +466,46 @@ def _refine(cell, h, cha, chg, chl, nc, peak, valley, inside, outside, hi, lo, s
 
 
 @jit
-def levels(cell, h, cha, chg, chl, nc, peak, valley, probes, acc, lev_a, lev_hi, lev_lo,
-           probe_hi, probe_lo, work, lower):
+def levels(cell, h, chain, nc, peak, valley, probes, acc, lev_a, lev_hi, lev_lo, probe_hi,
+           probe_lo, grid, level, idx):
     """The levels of one knot's set into lev_a, lev_hi, lev_lo (probes + 2,): the set at the
     accelerations probes (P,) (ascending; FINE_PROBES times as many evenly over [-acc, acc]
-    where none meets the set), the ends of the feasible ones refined by bisection against
-    their infeasible neighbours; a set that half the probes miss gets its levels again,
-    evenly over its refined range. Returns the number of levels (0: the set is empty)."""
+    where none meets the set, in grid), the ends of the feasible ones refined against their
+    infeasible neighbours; a set that half the probes miss gets its levels again, evenly
+    over its refined range. Returns the number of levels (0: the set is empty)."""
     p_n = probes.size
     scale = acc
-    grid = probes
+    points = probes
     count = p_n
-    first, last = _probe(cell, h, cha, chg, chl, nc, peak, valley, grid, count, scale,
-                         probe_hi, probe_lo, work, lower)
+    first, last = _probe(cell, h, chain, nc, peak, valley, points, count, scale, probe_hi,
+                         probe_lo, level, idx)
     if first < 0:
         count = p_n * FINE_PROBES
-        grid = np.empty(count)
         for k in range(count):
             grid[k] = -acc + 2.0 * acc * k / (count - 1)
-        first, last = _probe(cell, h, cha, chg, chl, nc, peak, valley, grid, count, scale,
-                             probe_hi, probe_lo, work, lower)
+        points = grid[:count]
+        first, last = _probe(cell, h, chain, nc, peak, valley, points, count, scale, probe_hi,
+                             probe_lo, level, idx)
         if first < 0:
             return 0
-    a0, hi0, lo0 = grid[first], probe_hi[first], probe_lo[first]
+    ends_a = (chain[0, 0], chain[0, nc - 1]) if nc > 0 else (np.nan, np.nan)
+    a0, hi0, lo0 = points[first], probe_hi[first], probe_lo[first]
     if first > 0:
-        a0, hi0, lo0 = _refine(cell, h, cha, chg, chl, nc, peak, valley, a0,
-                               grid[first - 1], hi0, lo0, scale, work, lower)
-    a1, hi1, lo1 = grid[last], probe_hi[last], probe_lo[last]
+        a0, hi0, lo0 = _refine(cell, h, chain, nc, peak, valley, a0, points[first - 1], hi0,
+                               lo0, ends_a[0], scale, level, idx)
+    a1, hi1, lo1 = points[last], probe_hi[last], probe_lo[last]
     if last < count - 1:
-        a1, hi1, lo1 = _refine(cell, h, cha, chg, chl, nc, peak, valley, a1,
-                               grid[last + 1], hi1, lo1, scale, work, lower)
+        a1, hi1, lo1 = _refine(cell, h, chain, nc, peak, valley, a1, points[last + 1], hi1,
+                               lo1, ends_a[1], scale, level, idx)
     m = 0
     if count == p_n and last - first + 1 >= p_n // 2:
-        if a0 < grid[first]:
+        if a0 < points[first]:
             _store(lev_a, lev_hi, lev_lo, m, a0, hi0, lo0)
             m += 1
         for k in range(first, last + 1):
-            _store(lev_a, lev_hi, lev_lo, m, grid[k], probe_hi[k], probe_lo[k])
+            _store(lev_a, lev_hi, lev_lo, m, points[k], probe_hi[k], probe_lo[k])
             m += 1
-        if a1 > grid[last]:
+        if a1 > points[last]:
             _store(lev_a, lev_hi, lev_lo, m, a1, hi1, lo1)
             m += 1
         return m
@@ -425,7 +516,7 @@ def levels(cell, h, cha, chg, chl, nc, peak, valley, probes, acc, lev_a, lev_hi,
         return m
     for k in range(1, p_n - 1):
         a = a0 + width * k / (p_n - 1)
-        hi, lo = _level(cell, a, h, cha, chg, chl, nc, peak, valley, scale, work, lower)
+        hi, lo = _level(cell, a, h, chain, nc, peak, valley, scale, level, idx)
         if hi >= 0.0:
             _store(lev_a, lev_hi, lev_lo, m, a, hi, lo)
             m += 1
@@ -489,12 +580,11 @@ def fold_end(rows, n, h, end_kind, p1, p2, out):
             out[m, 3] = sign * bound
             m += 1
     else:
-        scale = max(abs(p1), 1e-300)
+        thick = (MOVING_END_REL if end_kind == 1 else LOOSE_END_REL) * max(abs(p1), 1e-300)
         for sign in (1.0, -1.0):
             out[m, 0] = sign
             out[m, 1] = sign * h
             out[m, 2] = 0.0
-            out[m, 3] = sign * (p1 - h * p2) + (MOVING_END_REL if end_kind == 1
-                                                else LOOSE_END_REL) * scale
+            out[m, 3] = sign * (p1 - h * p2) + thick
             m += 1
     return m
