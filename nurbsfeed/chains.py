@@ -48,7 +48,7 @@ from nurbsfeed.program import MM_PER_UNIT, CurveBlock, PassThrough, ProgramItem
 
 MAX_WINDOW_CURVES = 400
 # the planner's grid nodes a window is expected to need (its length over the grid spacing at
-# full feed): the grid refines around curvature peaks, and the planner's programs grow with
+# full feed): the grid refines around curvature peaks, and the planner's sets grow with
 # the nodes
 MAX_WINDOW_NODES = 12_000
 MAX_GAP_LINES = 1000

@@ -72,8 +72,8 @@ FLOAT_KEYS = (REQUIRED_KEYS + ("max_curve_time_s", "min_block_time_s", "rest_mov
               + tuple(AXIS_KEYS))
 INT_KEYS = ("decimals", "feed_decimals", "move_periods")
 JERK_MODELS = ("paper", "path")  # profile key jerk_model (planning.path_model)
-# profile key planner: the paper's key points and S-curves, or the path model's linear
-# programs (planning.schedule); "envelope", the path model's planner before them, plans as
+# profile key planner: the paper's key points and S-curves, or the path model's controllable
+# sets (planning.reach_schedule); "envelope", an earlier path-model planner, plans as
 # "optimal" (a profile written for it keeps working)
 PLANNERS = ("scurve", "optimal", "envelope")
 PLANNER_ALIASES = {"envelope": "optimal"}

@@ -1,4 +1,4 @@
-"""A curve block's plan, checked from its points before anything is written (design §2e): the
+"""A curve block's plan, checked from its points before anything is written (design §2d): the
 planner's plan stepped and read as positions, slowed where they ask, the S-curve plan the one
 bounded fallback (`verified_plan`)."""
 
@@ -115,7 +115,7 @@ def verified_plan(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s:
 
 def _checked_plan(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s: np.ndarray,
                   max_curve_time_s: float, method: str, feed_cap: float) -> Checked:
-    """`planner.plan_curve`, and under the path model a look at the plan's points (design §2e):
+    """`planner.plan_curve`, and under the path model a look at the plan's points (design §2d):
     stepped by `method`, they are read as positions one period apart
     (`safety.slowdown_from_readings`, feed_cap the highest feed on the curve); where the path's
     speed or an axis's velocity is above its limit by more than POSITION_SPEED_REL, or an axis's

@@ -18,7 +18,7 @@ from nurbsfeed.machine import load_machine
 from nurbsfeed.pipeline import POSITION_REL
 from nurbsfeed.planning.basis import AT_REST, BETWEEN, POINTS, ChainEnds, EndState, point_weights
 from nurbsfeed.planning.planner import chain_schedule
-from nurbsfeed.planning.rows import cell_ratios
+from nurbsfeed.planning.ratios import cell_ratios
 from tests.bench.dense_curves import dense_curves
 from tests.cut_curves import cut
 

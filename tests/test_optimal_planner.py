@@ -1,8 +1,8 @@
-"""The path planner (`planner: optimal`, the default profile's; planning.cells, rows,
-banded_lp, schedule, schedule_law): its solver against an independent one, its rows against
-the limits they stand for, its law against its schedule, its cycle against closed forms, the
-reference and the S-curve planner, the limits measured from its points, and the check from the
-points before writing with its fallback."""
+"""The path planner (`planner: optimal`, the default profile's; planning.cells, reach_rows,
+reach_schedule, schedule_law): its rows against the limits they stand for, its law against its
+schedule, its cycle against closed forms, the reference and the S-curve planner, the limits
+measured from its points, and the check from the points before writing with its fallback.
+The kernels of its sets and passes have tests of their own (tests/test_reach_planner.py)."""
 
 from __future__ import annotations
 
@@ -13,10 +13,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import scipy.sparse as sp
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from scipy.optimize import linprog
 
 from nurbsfeed.analysis.bound.solve import jerk_limited_schedule
 from nurbsfeed.analysis.check import check_files
@@ -25,12 +23,11 @@ from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.interpolate.stepping import interpolate
 from nurbsfeed.machine import load_machine
 from nurbsfeed.pipeline import convert_file, plan_block, verified_plan
-from nurbsfeed.planning import rows as rows_module
-from nurbsfeed.planning.banded_lp import solve_lp
 from nurbsfeed.planning.basis import G_CAP, G_D, point_weights
 from nurbsfeed.planning.plan import PathDiagnostics, SCurveDiagnostics
 from nurbsfeed.planning.planner import plan_curve
-from nurbsfeed.planning.rows import ROWS_PER_POINT, all_rows, point_ratio
+from nurbsfeed.planning.ratios import point_ratio
+from nurbsfeed.planning.reach_rows import NORMAL_SIDES, ROWS_PER_CELL, cell_rows, limits_vector
 from nurbsfeed.safety import slowdown_from_points
 from tests.bench.dense_curves import _long_cam_curve, dense_curves
 from tests.test_bound import scurve_rest_to_rest_s
@@ -60,76 +57,7 @@ def dense_curve(name: str) -> NurbsCurve:
 
 # ---- the solver, against HiGHS ----------------------------------------------------------------
 
-def random_banded_lp(seed: int, n: int = 60, m: int = 300):
-    """A feasible banded LP (rows over three consecutive variables, some at the last two, a
-    variable fixed at 0, a feasible point inside every row), rows scaled over six decades as
-    the schedule's are."""
-    rng = np.random.default_rng(seed)
-    ridx = rng.integers(0, n - 1, m)
-    rval = rng.normal(size=(m, 3)) * 10.0 ** rng.uniform(-3, 3, (m, 1))
-    x_feasible = rng.random(n) * 0.5
-    x_feasible[n // 3] = 0.0  # the fixed variable's value
-    padded = np.concatenate([x_feasible, [0.0, 0.0]])
-    rhs = (np.einsum("rj,rj->r", rval, padded[ridx[:, None] + np.arange(3)])
-           + rng.random(m) * np.abs(rval).sum(axis=1))
-    upper = np.full(n, 2.0)
-    upper[n // 3] = 0.0
-    return ridx, rval, rhs, -rng.random(n), upper
-
-
-def dense_rows(n: int, ridx: np.ndarray, rval: np.ndarray) -> sp.csr_matrix:
-    cols = ridx[:, None] + np.arange(3)
-    keep = cols < n
-    rows = np.repeat(np.arange(ridx.size), 3).reshape(-1, 3)
-    return sp.csr_matrix((rval[keep], (rows[keep], cols[keep])), shape=(ridx.size, n))
-
-
-@pytest.mark.parametrize("seed", range(6))
-def test_the_banded_solver_finds_the_optimum_highs_finds(seed: int) -> None:
-    n = 60
-    ridx, rval, rhs, f, upper = random_banded_lp(seed, n)
-    x, status = solve_lp(n, ridx, rval, rhs, f, upper, np.maximum(upper, 1e-3), np.full(n, 0.3),
-                         np.empty((0, 5)))
-    reference = linprog(f, A_ub=dense_rows(n, ridx, rval), b_ub=rhs,
-                        bounds=np.column_stack([np.zeros(n), upper]), method="highs")
-    assert status == 0 and reference.status == 0
-    assert f @ x == pytest.approx(reference.fun, rel=1e-6, abs=1e-9)
-    left = dense_rows(n, ridx, rval) @ x
-    assert np.all(left - rhs <= 1e-7 * (np.abs(rhs) + 1e-9))  # every row, against its bound
-    assert np.all((x >= 0.0) & (x <= upper)) and x[n // 3] == 0.0
-
-
-def test_a_row_whose_terms_nearly_cancel_is_kept_against_its_own_bound() -> None:
-    """b'' on a short cell: coefficients of 1e6 whose row bound is 1. The residual is measured
-    against the bound (it was against the coefficients, and such a row came back broken by
-    0.2 % of its bound: a tiny star's tangential jerk 0.5 % over)."""
-    n = 3
-    ridx = np.array([0, 0])
-    rval = np.array([[1e6, -2e6 + 1.0, 1e6], [0.0, 1.0, 0.0]])
-    rhs = np.array([1.0, 5.0])
-    x, status = solve_lp(n, ridx, rval, rhs, -np.ones(n), np.full(n, 10.0), np.full(n, 10.0),
-                         np.full(n, 1.0), np.empty((0, 5)))
-    assert status == 0
-    assert rval[0] @ x <= rhs[0] * (1 + 1e-6)
-
-
 # ---- the rows, against the limits -------------------------------------------------------------
-
-def test_the_jerk_tangent_lies_below_the_limit_and_touches_it() -> None:
-    """|L| <= J / sqrt(b) - sqrt(b) |D| / T, linearised at b0: the row's bound - slope b is at
-    most that for every b (conservative) and equal to it at b0 (as long as b0 is within what the
-    jump alone allows)."""
-    jerk, jump = 30_000.0, 18.2  # a Z jerk limit and the kappa N jump of a curve-line knot
-    b = np.geomspace(1e-3, 1e5, 2001)
-    exact = jerk / np.sqrt(b) - np.sqrt(b) * jump
-    for b0 in (1.0, 100.0, 1600.0, 1e5):
-        slope, bound = rows_module._jerk_tangent(jerk, jump, b0)
-        assert np.all(bound - slope * b <= exact + 1e-9 * np.abs(exact))
-        if b0 <= jerk / jump:
-            at = jerk / math.sqrt(b0) - math.sqrt(b0) * jump
-            assert bound - slope * b0 == pytest.approx(at, rel=1e-12)
-        assert bound > 0.0  # b = 0 always keeps the row
-
 
 def layout_and_schedule(curve: NurbsCurve, lim):
     """The layout and schedule plan_path makes of `curve`, by planning it."""
@@ -151,15 +79,25 @@ def layout_and_schedule(curve: NurbsCurve, lim):
 
 
 def rows_at(layout, lim, c):
-    q_n = layout.cells.shape[0]
-    size = q_n * 3 * ROWS_PER_POINT
-    idx, val, rhs = np.empty(size, dtype=np.int64), np.empty((size, 3)), np.empty(size)
-    r = all_rows(c, layout.cells, layout.geo, lim.jerk_mm_s3, lim.acc_mm_s2,
-                 lim.normal_jerk_mm_s3, np.array(lim.axis_acc_mm_s2),
-                 np.array(lim.axis_jerk_mm_s3), lim.period_s, idx, val, rhs)
-    padded = np.concatenate([c, [0.0, 0.0]])
-    return (np.einsum("rj,rj->r", val[:r], padded[idx[:r, None] + np.arange(3)]), rhs[:r],
-            idx[:r])
+    """Every cell's rows (planning.reach_rows) linearised at the schedule c itself, and their
+    left sides at its motion: b, a = b'/2 and u = b''/2 at each cell's start. (left, rhs)."""
+    limits = limits_vector(lim)
+    rows = np.empty((ROWS_PER_CELL, 4))
+    w = np.empty((3, 3))
+    left, rhs = [], []
+    for q in range(layout.cells.shape[0]):
+        i0 = int(layout.cells[q, 0])
+        b_at = []
+        for x in (0.0, 0.5, 1.0):
+            point_weights(*layout.cells[q, 1:5], x, w)
+            b_at.append(max(float(w[0] @ c[i0:i0 + 3]), 1e-12))
+        point_weights(*layout.cells[q, 1:5], 0.0, w)
+        b, d, dd = w @ c[i0:i0 + 3]
+        g = layout.geo[q]
+        n = cell_rows(g[0], g[1], g[2], layout.cells[q, 4], *b_at, 0.0, 0.0, limits, rows)
+        left.append(rows[:n, :3] @ np.array([b, 0.5 * d, 0.5 * dd]))
+        rhs.append(rows[:n, 3].copy())
+    return np.concatenate(left), np.concatenate(rhs)
 
 
 def worst_point_ratio(geo, layout, lim, c) -> float:
@@ -187,17 +125,19 @@ def test_rows_that_hold_keep_every_limit_and_every_limit_kept_nearly_holds_them(
     lim = DEFAULT.limits
     layout, schedule = layout_and_schedule(dense_curve(name), lim)
     c = np.asarray(schedule.c)
-    left, rhs, _ = rows_at(layout, lim, c)
-    assert np.all(left <= rhs * (1 + 1e-6))
+    left, rhs = rows_at(layout, lim, c)
+    assert np.all(left <= rhs + 1e-6 * np.abs(rhs) + 1e-9)
     assert 0.98 < worst_point_ratio(layout.geo, layout, lim, c) <= 1.0 + 1e-6  # fast: it binds
     uncapped = layout.geo.copy()
-    uncapped[:, :, G_CAP] = np.inf  # the caps are the box's, not rows
+    uncapped[:, :, G_CAP] = np.inf  # scaled past the caps, the other limits bind
     ratio = worst_point_ratio(uncapped, layout, lim, c)
+    capless = dataclasses.replace(layout, geo=uncapped)
     for lam in (1.0 / ratio, 1.05 / ratio):
-        left, rhs, _ = rows_at(layout, lim, c * lam**2)
-        excess = float(np.max(left / rhs))
+        left, rhs = rows_at(capless, lim, c * lam**2)
+        bounded = rhs > 0.0
+        excess = float(np.max(left[bounded] / rhs[bounded]))
         if lam * ratio <= 1.0:
-            assert excess <= 1.0 / math.cos(math.pi / rows_module.NORMAL_SIDES) + 1e-6
+            assert excess <= 1.0 / math.cos(math.pi / NORMAL_SIDES) + 1e-6
         else:
             assert excess > 1.0
 
@@ -253,13 +193,13 @@ def test_a_straight_line_runs_within_1_percent_of_the_closed_form(length_mm: flo
 
 def test_each_planner_hands_on_its_own_diagnostics() -> None:
     """What only `nurbsfeed plan` reads comes in the planner's own record: the path planner's
-    (its keys are its rests) the programs it solved and a peak per stretch, the S-curve
+    (its keys are its rests) the passes over its sets and a peak per stretch, the S-curve
     planner's a speed per key point and a peak and holds per segment."""
     line = NurbsCurve.build(1, [0, 0, 1, 1], [[0, 0, 0], [50.0, 0, 0]])
     lim = PAPER_PATH.limits
     path = plan_curve(line, lim)
     assert path.planner == "optimal" and isinstance(path.diagnostics, PathDiagnostics)
-    assert path.diagnostics.programs >= 1
+    assert path.diagnostics.passes >= 2  # a backward and a forward one at least
     assert path.diagnostics.stretch_peak_mm_s.shape == path.piece_periods.shape
     assert 0.9 * lim.feed_mm_s < path.diagnostics.stretch_peak_mm_s[0] <= lim.feed_mm_s
     scurve = plan_curve(line, scurve_of(lim))
@@ -327,7 +267,7 @@ def test_a_knot_where_a_curve_meets_a_line_passes_at_the_speed_its_jump_allows()
     assert_keeps_every_path_limit(interpolate(plan, "rk2c"), DEFAULT.limits, "retrace")
 
 
-def test_a_joint_feed_step_narrower_than_any_cell_does_not_stall_the_solver() -> None:
+def test_a_joint_feed_step_narrower_than_any_cell_does_not_stall_the_planner() -> None:
     """samples/linuxcnc-g5-chain.ngc: each joint's curvature jump caps the feed over 1e-9 of the
     chain's range, and cells that narrow made the programs' rows so stiff that none solved; the
     start stood in, slowed 15 times (29.7 s for 39 mm). Cells of at least a millionth of the

@@ -150,9 +150,9 @@ def _echo_segments(p: Plan, d: SCurveDiagnostics, unit: str) -> None:
 
 
 def _echo_stretches(p: Plan, d: PathDiagnostics, unit: str) -> None:
-    """The stretches between rests of the path planner's plan, whose keys are the rests alone
-    (the count of linear programs it solved printed as its limit-fix rounds)."""
-    click.echo(f"  {p.planner} schedule: {d.programs} limit-fix rounds, uniform slowdown "
+    """The stretches between rests of the path planner's plan, whose keys are the rests alone,
+    and the passes over their sets that found it."""
+    click.echo(f"  {p.planner} schedule: {d.passes} passes over its sets, uniform slowdown "
                f"{p.uniform_slowdown:.4f}; stretches between rests ({unit}, {unit}/s):")
     click.echo(f"  {'#':>3} {'length':>12} {'v_peak':>10} {'periods':>10}")
     key_s = p.key_s_mm

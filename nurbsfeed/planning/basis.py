@@ -1,10 +1,9 @@
-"""What the schedule's cells and their rows share (design §2e): where a cell's limits are read,
+"""What the schedule's cells and their checks share (design §2d): where a cell's limits are read,
 how one point's geometry is laid out, and the spline's weights at a share of a cell.
 
 b on an inner cell is a quadratic in arc length fixed by three consecutive coefficients
 (planning.cells: at the Greville abscissae, g0 and g1 apart, the knot between the first two
-at weight w0): b, b' and b'' anywhere on the cell are linear in them (`point_weights`), which
-is what makes every limit a row over three consecutive variables (planning.rows).
+at weight w0): b, b' and b'' anywhere on the cell are linear in them (`point_weights`).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The schedule's cells (design §2e): where b = v^2 is planned along one curve, and what the
+"""The schedule's cells (design §2d): where b = v^2 is planned along one curve, and what the
 limits read there.
 
 A *stretch* runs from one rest to the next (the curve's ends, its corners, cusps and
@@ -15,8 +15,9 @@ g_k = xi_k+1 - xi_k
     b(knot k)       = w_k c_k + (1 - w_k) c_k+1
     b'' (inner cell between knots k-1 and k, the coefficient k's) = (slope_k - slope_k-1) / h
 
-so b, b' and b'' anywhere on a cell are linear in its three coefficients (`point_weights`),
-and the limits become rows over three consecutive variables (planning.rows). A rest cell's
+so b, b' and b'' anywhere on a cell are linear in its three coefficients (`point_weights`):
+the planner's motion (b and a = b'/2 at every knot, planning.reach_schedule) is these
+coefficients, and the exact check reads every cell through them (planning.ratios). A rest cell's
 b = c y^(4/3) has every quantity proportional to a power of its far coefficient c, so its
 limits are a cap on c (`rest_caps`), and its C1 join with the spline fixes the coefficient
 after c: c_1 = c_0 (1 + 2/3 h_1 / h_rest).
@@ -46,7 +47,7 @@ from nurbsfeed.planning.grid import Grid
 from nurbsfeed.planning.limits import Limits
 from nurbsfeed.planning.path_check import arc_parameters
 from nurbsfeed.planning.path_model import geometry_rows
-from nurbsfeed.planning.rows import point_ratio
+from nurbsfeed.planning.ratios import point_ratio
 
 REST_POINTS = (0.25, 0.5, 1.0)  # where a rest cell's limits are read, as y
 REST_BISECTIONS = 60

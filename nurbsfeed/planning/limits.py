@@ -34,8 +34,8 @@ class Limits:
     axis_vel_mm_s: tuple[float, float, float] = (math.inf, math.inf, math.inf)  # X, Y, Z
     axis_acc_mm_s2: tuple[float, float, float] = (math.inf, math.inf, math.inf)
     axis_jerk_mm_s3: tuple[float, float, float] = (math.inf, math.inf, math.inf)
-    # "scurve": the paper's key points and S-curves; "optimal": planning.path_plan's linear
-    # programs (path model)
+    # "scurve": the paper's key points and S-curves; "optimal": planning.path_plan's
+    # controllable sets (path model)
     planner: str = "scurve"
 
 

@@ -1,4 +1,4 @@
-"""The schedule's nodes (design §2e): where the cells of planning.cells begin and end along one
+"""The schedule's nodes (design §2d): where the cells of planning.cells begin and end along one
 curve, the speed estimate that sizes them, and the cuts where a schedule needs finer ones.
 
 Nodes: the planning grid's (samples at most two full-speed steps apart, curvature peaks,
@@ -30,9 +30,8 @@ RECUT_SLACK = 2.0  # ... and one the schedule spends over this many times as lon
 MAX_CUT = 64  # pieces a cell is cut into at most in one go
 # a grid node closer than this many periods at the speed estimate to the last one kept goes
 # (curvature maxima, knots, stops and the ends always stay): cells far shorter than a period
-# are finer than anything the machine's positions show, they make rows that ask b'' to
-# follow 2 kappa^2 b to a millionth (a 3 um near cusp), beyond what the programs resolve, and
-# each costs the programs as much as a long one
+# are finer than anything the machine's positions show, they make rows that ask u to follow
+# kappa^2 b to a millionth (a 3 um near cusp), and each costs the passes as much as a long one
 MIN_CELL_PERIODS = 1.0
 # ... unless the curvature across the merged cell changes by more than this factor (kappa
 # below kappa_0, where it sets no limit, counts as kappa_0): in a valley the rows must see the

@@ -1,8 +1,9 @@
-"""The path planner's plan of one curve (`planner: optimal`, design §2e): the planning grid,
+"""The path planner's plan of one curve (`planner: optimal`, design §2d): the planning grid,
 its rests, the cells, the schedule, the law.
 
-    grid (planning.grid) -> rests -> cells (planning.cells) -> schedule (planning.schedule:
-    linear programs over b = v^2) -> law at the periods (planning.schedule_law)
+    grid (planning.grid) -> rests -> cells (planning.cells) -> schedule (planning.reach_schedule:
+    the fastest motion b = v^2 inside each stretch's controllable sets) -> law at the periods
+    (planning.schedule_law)
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from nurbsfeed.planning.grid import Grid
 from nurbsfeed.planning.limits import Limits, curvature_threshold
 from nurbsfeed.planning.nodes import cut_cells, schedule_nodes
 from nurbsfeed.planning.plan import KIND_CORNER, KIND_CUSP, KIND_END
-from nurbsfeed.planning.reach_schedule import reach_schedule as plan_schedule
+from nurbsfeed.planning.reach_schedule import plan_schedule
 from nurbsfeed.planning.schedule import Schedule, cell_times
 from nurbsfeed.planning.schedule_law import schedule_law
 from nurbsfeed.planning.timelaw import TimeLaw
@@ -28,7 +29,7 @@ from nurbsfeed.planning.timelaw import TimeLaw
 # duration (the law holds a piece a period)
 MAX_LAW_PERIODS = 1_000_000
 MIN_STRETCH_NODES = 3  # nodes from one rest to the next (the next counted) a stretch needs
-# past this many cells too: the programs' rows take 4 kB a cell
+# past this many cells too: a stretch's sets take 1.3 kB a cell, and the passes hold two
 MAX_CELLS = 40_000
 # a schedule that dwells in cells far longer than the estimate sized them, or breaks a limit
 # between a cell's points, is planned again on cells cut (nodes.cut_cells), this many times at
@@ -38,8 +39,8 @@ RECUTS = 2
 # slowdown
 RECUTS_MOVING = 5
 # a chain that ends moving keeps the state it was given there, so its schedule may not be
-# slowed: past this slowdown it is not planned; below it (the programs' rounding: their rows
-# hold to 1e-7 of their bounds) the stretch at the moving end is not slowed (schedule_law)
+# slowed: past this slowdown it is not planned; below it (the passes' rounding: their states
+# sit 1e-7 inside the sets' boundaries) the stretch at the moving end is not slowed (schedule_law)
 OPEN_SLOWDOWN_REL = 1e-6
 # A chain that starts moving starts as the last window's points moved, which lie off that
 # window's law by its stepping's drift (micrometres, interpolate.landing): where that window
@@ -53,13 +54,14 @@ START_SLACK_REL = 0.005
 @dataclass(frozen=True, eq=False)
 class PathSchedule:
     """What planning.planner makes a Plan of: the law (whole periods per stretch, every
-    slowdown applied), the slowdown the schedule's own check asked for (>= 1), the linear
-    programs solved, the grid nodes (R,) the motion rests at and their kinds (R,) (a moving
-    end of the chain among them: the end of its stretch), and the schedule itself."""
+    slowdown applied), the slowdown the schedule's own check asked for (>= 1), the passes
+    over the sets that found it, the grid nodes (R,) the motion rests at and their kinds (R,)
+    (a moving end of the chain among them: the end of its stretch), and the schedule
+    itself."""
 
     law: TimeLaw
     slowdown: float
-    rounds: int
+    passes: int
     rest_nodes: np.ndarray
     kinds: np.ndarray
     schedule: Schedule
@@ -96,19 +98,19 @@ def plan_path(curve: NurbsCurve, grid: Grid, lim: Limits, limit: np.ndarray, cap
     speed limit at the grid's nodes with a = j = 0 (it says where the motion rests); cap (M,):
     the caps on the speed there (chord error, normal acceleration, feeds, axis velocities);
     feed_breaks: the parameters where the programmed feed changes; None where it cannot plan
-    (a stretch of no length between two rests, over MAX_CELLS cells, no program solved, a law
-    above MAX_LAW_PERIODS periods).
+    (a stretch of no length between two rests, over MAX_CELLS cells, a stretch without a motion
+    inside its sets, a law above MAX_LAW_PERIODS periods).
 
     The curve is a chain (design §3b) that starts and ends at rest, or moving in the state
     `ends` gives (its speed and acceleration there): the look-ahead of a chain planned in
     windows. A moving end's state is kept as given, so such a chain is not planned (None) where
     it breaks a limit there, where the curve must rest there (a corner, a pointwise limit of
-    0), where no program solves, or where its schedule would have to be slowed. seed: the
-    plan that state comes from where the two overlap, as its nodes' arc (N,) on this curve,
-    its coefficients' abscissae and values (K,): its cells are this plan's there and its
-    schedule the first program's linearisation point, so that it is a schedule this plan's
-    programs allow (a time-optimal plan rides its limits: from its state, a plan on nodes of
-    its own may find no way to brake in time)."""
+    0), where a stretch has no motion inside its sets, or where its schedule would have to be
+    slowed. seed: the plan that state comes from where the two overlap, as its nodes' arc (N,)
+    on this curve, its coefficients' abscissae and values (K,): its cells are this plan's there
+    and its schedule the first linearisation point (and a floor, reach_schedule.SEED_KEEP),
+    so that it is a motion this plan's sets allow (a time-optimal plan rides its limits: from
+    its state, a plan on nodes of its own may find no way to brake in time)."""
     rests, kinds = rest_nodes(grid, limit)
     if rests.size < 2 or not np.all(np.diff(grid.s_mm[rests]) > 0.0):
         return None
@@ -154,5 +156,5 @@ def plan_path(curve: NurbsCurve, grid: Grid, lim: Limits, limit: np.ndarray, cap
     if moving.any() and schedule.slowdown * extra_slowdown > 1.0 + OPEN_SLOWDOWN_REL:
         return None
     law, _ = schedule_law(schedule, lim.period_s, extra_slowdown)
-    return PathSchedule(law, schedule.slowdown * extra_slowdown, schedule.programs, rests, kinds,
+    return PathSchedule(law, schedule.slowdown * extra_slowdown, schedule.passes, rests, kinds,
                         schedule)

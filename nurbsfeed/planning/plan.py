@@ -56,10 +56,11 @@ class SCurveDiagnostics(PlanDiagnostics):
 
 @dataclass(frozen=True, eq=False)
 class PathDiagnostics(PlanDiagnostics):
-    """The path planner's (`planner: optimal`, planning.path_plan): the linear programs it
-    solved and the peak speed of each stretch between rests (P,; read-only)."""
+    """The path planner's (`planner: optimal`, planning.path_plan): the passes over the
+    stretches' sets that found its schedule and the peak speed of each stretch between rests
+    (P,; read-only)."""
 
-    programs: int
+    passes: int
     stretch_peak_mm_s: np.ndarray
 
 

@@ -7,14 +7,14 @@ The profile key `planner` chooses the planner, `jerk_model` what the machine's l
   (planning.path_check) with the limit lowered where it breaks one; what is left, a uniform
   slowdown.
 - `planner: optimal` (the default profile's, path model): planning.path_plan. The schedule b =
-  v^2 is a spline over the cells of planning.cells; every limit of the path model is a row of a
-  linear program over its coefficients (planning.rows: the caps, the accelerations, the jerks
-  along and across the path and per axis, at each cell's start, middle and end), and a short
-  sequence of programs (planning.schedule, solved by planning.banded_lp) makes it as fast as
-  they allow; planning.schedule_law samples it at the periods. Where it cannot plan (a law
-  longer than path_plan.MAX_LAW_PERIODS) the S-curve plan stands in. Its unit is a chain of
-  curves merged into one: at rest at both ends, or (`chain_schedule`) moving at either in a
-  given state, for a chain planned in windows.
+  v^2 is a spline over the cells of planning.cells; every limit of the path model (the caps,
+  the accelerations, the jerks along and across the path and per axis) is a row over a cell's
+  state (planning.reach_rows), and each stretch between rests runs the fastest motion its
+  controllable sets allow (planning.reach_sets, reach_pass, reach_schedule: TOPP-RA's
+  reachability analysis one order up); planning.schedule_law samples it at the periods. Where
+  it cannot plan (a law longer than path_plan.MAX_LAW_PERIODS) the S-curve plan stands in. Its
+  unit is a chain of curves merged into one: at rest at both ends, or (`chain_schedule`)
+  moving at either in a given state, for a chain planned in windows.
 
 Every plan then goes to `verified.verified_plan`, which steps it and reads its points as
 positions; the motion guard (`safety`) refuses what is still above a limit.
@@ -131,7 +131,7 @@ def _schedule_plan(curve: NurbsCurve, lim: Limits, grid: Grid, kappa0: float, n_
     for arr in (rest_nodes, kinds, piece_key, periods, scale, peaks):
         arr.setflags(write=False)
     diagnostics = PathDiagnostics(kappa0_1_mm=kappa0, n_peaks_above_threshold=n_peaks,
-                                  programs=schedule.rounds, stretch_peak_mm_s=peaks)
+                                  passes=schedule.passes, stretch_peak_mm_s=peaks)
     return Plan(curve=curve, limits=lim, grid=grid, key_node=rest_nodes, key_kind=kinds,
                 law=law, uniform_slowdown=schedule.slowdown, piece_key=piece_key,
                 piece_periods=periods, piece_scale=scale, planner=lim.planner,

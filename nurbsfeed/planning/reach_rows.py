@@ -14,9 +14,10 @@ over the cell's start state (b, a) and its u. The jerks are sqrt(b) |L(b, a, u)|
 linear (along the path L = u - kappa^2 b, per axis u T_x + 3 a K_x + b K_s,x, across the path
 the vector 3 a K + b (K_s + kappa^2 T)); J / sqrt(b) is convex in b, so its tangent at a
 linearisation point b0 lies below it and a row |L| <= tangent keeps the true limit for every b
-(rows.py's convex-concave step, the same rows the linear programs had). A knot where kappa N
-jumps by D adds b |D| / T, what positions one period apart read, to the normal jerk and each
-axis's. At a knot a floor b >= f can join (planning.reach: where the plan must not dip).
+(a convex-concave step: the rows are exact at b0, and the next pass takes them at the motion
+the last one found). A knot where kappa N jumps by D adds b |D| / T, what positions one period
+apart read, to the normal jerk and each axis's. At a knot a floor b >= f can join
+(planning.reach_schedule: where the motion must not dip).
 """
 
 from __future__ import annotations

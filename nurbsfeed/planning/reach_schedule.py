@@ -21,6 +21,7 @@ import numpy as np
 from nurbsfeed.planning.basis import BETWEEN, POINTS
 from nurbsfeed.planning.cells import Layout
 from nurbsfeed.planning.limits import Limits
+from nurbsfeed.planning.ratios import cell_ratios
 from nurbsfeed.planning.reach_pass import (
     END_MOVING,
     END_MOVING_LOOSE,
@@ -32,7 +33,6 @@ from nurbsfeed.planning.reach_pass import (
 )
 from nurbsfeed.planning.reach_rows import B_FLOOR, limits_vector
 from nurbsfeed.planning.reach_sets import MAX_LEVELS
-from nurbsfeed.planning.rows import cell_ratios
 from nurbsfeed.planning.schedule import BETWEEN_REL, Schedule, cell_times, static_b
 
 STATIC_REACH = 2.0
@@ -299,7 +299,7 @@ def _estimate(layout: Layout, lim: Limits) -> np.ndarray:
     return lin
 
 
-def reach_schedule(layout: Layout, lim: Limits, start: np.ndarray | None = None,
+def plan_schedule(layout: Layout, lim: Limits, start: np.ndarray | None = None,
                    seed: tuple[np.ndarray, np.ndarray] | None = None,
                    slack: tuple[float, float] = (0.0, 0.0)) -> Schedule:
     """The schedule on `layout` under `lim` (module docstring): linearised first at start

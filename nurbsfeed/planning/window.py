@@ -8,7 +8,7 @@ scale its stretch runs at), and `seed`: the last plan's nodes and coefficients o
 path, from there up to `SEED_BEFORE_END` short of where that plan's approach to its own rest
 could begin. A time-optimal plan rides its limits, so from its state a plan on cells of its own
 may find no way to brake in time; on the same cells, linearised at the same schedule, the last
-plan is one its programs allow (planning.path_plan).
+plan is one its sets allow (planning.path_plan).
 """
 
 from __future__ import annotations
