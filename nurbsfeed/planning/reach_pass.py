@@ -225,13 +225,40 @@ def forward(h, g0, gm, g1, b_knot, b_mid, floors, lims, start_kind, start_p1, st
 
 
 @jit
+def _segment_top(l1a, h1a, l2a, h2a, l1b, h1b, l2b, h2b):
+    """The greatest min(h1, h2) where both lows lie below both highs, all four linear from their
+    values at one end (a) to the other (b) of a piece of the a axis; -1 where nowhere."""
+    ta, tb = 0.0, 1.0
+    for p in range(4):
+        fa = (h1a if p < 2 else h2a) - (l1a if p % 2 == 0 else l2a)
+        fb = (h1b if p < 2 else h2b) - (l1b if p % 2 == 0 else l2b)
+        if fa < 0.0 and fb < 0.0:
+            return -1.0
+        if fa < 0.0:
+            ta = max(ta, fa / (fa - fb))
+        elif fb < 0.0:
+            tb = min(tb, fa / (fa - fb))
+    if ta > tb:
+        return -1.0
+    top = -1.0
+    for t in (ta, tb):
+        top = max(top, min(h1a + t * (h1b - h1a), h2a + t * (h2b - h2a)))
+    da, db = h1a - h2a, h1b - h2b
+    if da * db < 0.0:  # the two highs cross in between
+        t = da / (da - db)
+        if ta <= t <= tb:
+            top = max(top, h1a + t * (h1b - h1a))
+    return top
+
+
+@jit
 def highest(ka, khi, klo, kn, ra, rhi, rlo, rn, out):
     """Per knot (Q + 1,): the greatest b of a state both controllable (levels ka, khi, klo, kn,
     (Q + 1, L)) and reachable from the start (levels of the reversed stretch, ra ..., at knot
-    Q - j with a's sign turned), into out; 0 where the two do not meet. Both boundaries are
-    linear between levels: the highest point of the lower of the two upper ones lies at a
-    level of either (walked in ascending order, the reversed ones from their end) or where
-    they cross between two such."""
+    Q - j with a's sign turned), into out; 0 where the two do not meet. Both sets' boundaries
+    are linear between the levels of either (walked in ascending order, the reversed ones from
+    their end): on each such piece the top is where the lower high peaks inside the part where
+    both lows lie below both highs, a one-dimensional program with a closed form."""
     q1 = khi.shape[0]
     for j in range(q1):
         jr = q1 - 1 - j
@@ -243,21 +270,18 @@ def highest(ka, khi, klo, kn, ra, rhi, rlo, rn, out):
             i = 0
             k = nr - 1
             x = lo_a
-            d_last = np.nan
-            x_last = lo_a
+            first = True
+            l1p = h1p = l2p = h2p = 0.0
             while lo_a <= hi_a:
                 l1, h1 = _at(ka[j], khi[j], klo[j], nk, x)
                 l2, h2 = _at(ra[jr], rhi[jr], rlo[jr], nr, -x)
-                if max(l1, l2) <= min(h1, h2):
-                    best = max(best, min(h1, h2))
-                d = h1 - h2
-                if d_last * d < 0.0:  # the two upper boundaries cross in between
-                    xc = x_last + (x - x_last) * d_last / (d_last - d)
-                    m1, c1 = _at(ka[j], khi[j], klo[j], nk, xc)
-                    m2, c2 = _at(ra[jr], rhi[jr], rlo[jr], nr, -xc)
-                    if max(m1, m2) <= min(c1, c2):
-                        best = max(best, min(c1, c2))
-                d_last, x_last = d, x
+                if first:
+                    if max(l1, l2) <= min(h1, h2):
+                        best = max(best, min(h1, h2))
+                    first = False
+                else:
+                    best = max(best, _segment_top(l1p, h1p, l2p, h2p, l1, h1, l2, h2))
+                l1p, h1p, l2p, h2p = l1, h1, l2, h2
                 while i < nk and ka[j, i] <= x:
                     i += 1
                 while k >= 0 and -ra[jr, k] <= x:

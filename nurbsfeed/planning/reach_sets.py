@@ -119,19 +119,22 @@ def prune(rows, n, sign, a_lo, a_hi, b_hi):
                     rows, k, sign, corners_a[c], corners_b[c]):
                 k = r
         best[c] = k
+    # the tightest rows' values at the corners, kept aside: compaction overwrites the rows
+    tight = np.empty((5, 4))
+    for c in range(5):
+        for e in range(4):
+            tight[c, e] = _box_value(rows, best[c], sign, corners_a[e], corners_b[e])
     m = 0
     for r in range(n):
         dominated = False
         for c in range(5):
-            k = best[c]
-            if k == r:
+            if best[c] == r:
                 dominated = False
                 break
             if not dominated:
                 tighter = True
                 for e in range(4):
-                    if not _box_value(rows, k, sign, corners_a[e], corners_b[e]) <= _box_value(
-                            rows, r, sign, corners_a[e], corners_b[e]):
+                    if not tight[c, e] <= _box_value(rows, r, sign, corners_a[e], corners_b[e]):
                         tighter = False
                         break
                 dominated = tighter
