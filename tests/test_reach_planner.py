@@ -1,9 +1,10 @@
-"""The reach planner's kernels (planning.reach_rows, reach_sets, reach_pass): the chains' level
-intervals and the pruned bounds against brute force; a real stretch's controllable sets against
-linear programs over the same rows (HiGHS: every state inside a set has a way on, and little
-above a set has one); the forward pass's motion against its rows, its sets and its ends; the
-highest state two sets share against every candidate point; the folded end rows against the end
-they stand for; a motion's time against quadrature; the jerk rows' tangent against its limit."""
+"""The reach planner's kernels (planning.reach_rows, reach_bounds, reach_sets, reach_pass):
+the chains' level intervals and the pruned bounds against brute force; a real stretch's
+controllable sets against linear programs over the same rows (HiGHS: every state inside a set
+has a way on, and little above a set has one); the forward pass's motion against its rows, its
+sets and its ends; the highest state two sets share against every candidate point; the folded
+end rows against the end they stand for; a motion's time against quadrature; the jerk rows'
+tangent against its limit."""
 
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ from nurbsfeed.planning import path_plan
 from nurbsfeed.planning import reach_schedule as rs
 from nurbsfeed.planning.cells import Layout
 from nurbsfeed.planning.planner import plan_curve
+from nurbsfeed.planning.reach_bounds import LOOSE_END_REL, MOVING_END_REL, fold_end, prune
 from nurbsfeed.planning.reach_pass import (
     END_MOVING,
     END_MOVING_LOOSE,
@@ -34,14 +36,7 @@ from nurbsfeed.planning.reach_pass import (
     motion_time,
 )
 from nurbsfeed.planning.reach_rows import B_FLOOR, ROWS_PER_CELL, cell_rows, jerk_tangent
-from nurbsfeed.planning.reach_sets import (
-    LOOSE_END_REL,
-    MOVING_END_REL,
-    fold_end,
-    prune,
-    sublevel,
-    superlevel,
-)
+from nurbsfeed.planning.reach_sets import sublevel, superlevel
 
 DEFAULT = load_machine("default")
 # a cubic out of the plane (the normal jerk's polygon rows), 30 mm: 114 cells under the default

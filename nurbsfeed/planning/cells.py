@@ -51,6 +51,8 @@ from nurbsfeed.planning.ratios import point_ratio
 
 REST_POINTS = (0.25, 0.5, 1.0)  # where a rest cell's limits are read, as y
 REST_BISECTIONS = 60
+# a node this close to an interior knot (a share of the parameter range) is on it (_knot_index)
+KNOT_NEAR_REL = 1e-6
 
 
 @dataclass(frozen=True, eq=False)
@@ -120,16 +122,22 @@ def point_geometry(curve: NurbsCurve, lim: Limits, u: np.ndarray, feed_mm_s: np.
 
 
 def _knot_index(curve: NurbsCurve, u: np.ndarray) -> np.ndarray:
-    """Per parameter (N,): the index of the interior knot it lies on (within rounding), -1."""
+    """Per parameter (N,): the index of the interior knot it lies on, -1. On it within
+    KNOT_NEAR_REL of the parameter range: a node the knot's own merged into (nodes.py keeps
+    none closer than a millionth of the length; a chain's joint feed step puts one 1e-9 of the
+    range before it) stands for the knot, and its jump of kappa N, which the points one period
+    apart read wherever in the period it falls, joins that node's rows."""
     breaks = curve.span_breaks[1:-1]
     out = np.full(u.size, -1, dtype=np.int64)
     if breaks.size == 0:
         return out
+    near_u = KNOT_NEAR_REL * float(curve.span_breaks[-1] - curve.span_breaks[0])
     near = np.clip(np.searchsorted(breaks, u), 0, breaks.size - 1)
     for cand in (near - 1, near):
         ok = cand >= 0
         c = np.where(ok, cand, 0)
-        hit = ok & (np.abs(u - breaks[c]) <= 4 * np.spacing(np.abs(breaks[c]) + 1.0))
+        hit = ok & (np.abs(u - breaks[c]) <= np.maximum(
+            near_u, 4 * np.spacing(np.abs(breaks[c]) + 1.0)))
         out[hit] = c[hit] + 1  # index into span_breaks
     return out
 

@@ -44,11 +44,13 @@ RECUTS_MOVING = 5
 OPEN_SLOWDOWN_REL = 1e-6
 # A chain that starts moving starts as the last window's points moved, which lie off that
 # window's law by its stepping's drift (micrometres, interpolate.landing): where that window
-# was braking at its limits, no schedule from the state it hands on may keep them exactly. It
-# is planned again with every limit within START_SLACK_MM (the distance it may take to
-# brake, `start_slack_mm`) of its start loosened by START_SLACK_REL, what the conversion's look
-# at the points allows any plan (verified.POSITION_REL), rather than coming to rest.
-START_SLACK_REL = 0.005
+# was braking at its limits, no schedule from the state it hands on may keep them exactly; a
+# chain that ends in a state another plan rides its limits in may find, on cells of its own,
+# no way into it, or one that breaks a limit beside it by a hair. Either is planned again with
+# every limit within `end_slack_mm` (the distance it may take to brake) of its moving ends
+# loosened by END_SLACK_REL, what the conversion's look at the points allows any plan
+# (verified.POSITION_REL), rather than not planned.
+END_SLACK_REL = 0.005
 
 
 @dataclass(frozen=True, eq=False)
@@ -67,8 +69,8 @@ class PathSchedule:
     schedule: Schedule
 
 
-def start_slack_mm(lim: Limits) -> float:
-    """How far from a moving start its limits may be loosened: the distance braking from the
+def end_slack_mm(lim: Limits) -> float:
+    """How far from a moving end its limits may be loosened: the distance braking from the
     feed takes at most, v (v / A + A / J)."""
     v = lim.feed_mm_s
     return v * (v / lim.acc_mm_s2 + lim.acc_mm_s2 / lim.jerk_mm_s3)
@@ -131,8 +133,9 @@ def plan_path(curve: NurbsCurve, grid: Grid, lim: Limits, limit: np.ndarray, cap
     layout = build_layout(curve, grid, lim, s_mm, u, rest, v_estimate, feed_at_u, ends)
     slack = (0.0, 0.0)
     schedule = plan_schedule(layout, lim, None, None if seed is None else seed[1:])
-    if not schedule.solved and moving[0]:
-        slack = (START_SLACK_REL, start_slack_mm(lim))
+    if moving.any() and not (schedule.solved
+                             and schedule.slowdown <= 1.0 + OPEN_SLOWDOWN_REL):
+        slack = (END_SLACK_REL, end_slack_mm(lim))
         schedule = plan_schedule(layout, lim, None, None if seed is None else seed[1:], slack)
     if not schedule.solved:
         return None

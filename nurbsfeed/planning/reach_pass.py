@@ -18,20 +18,18 @@ import math
 import numpy as np
 
 from nurbsfeed.jit import jit
+from nurbsfeed.planning.reach_bounds import b_top, fold_end, prune, split_rows
 from nurbsfeed.planning.reach_rows import ROWS_PER_CELL, cell_rows
 from nurbsfeed.planning.reach_sets import (
     FINE_PROBES,
     FOCUS_PROBES,
     FOCUS_REL,
+    KEY_PROBES,
     MAX_LEVELS,
     WIDE_PROBES,
-    b_top,
     chain_of,
-    fold_end,
     levels,
     probes_around,
-    prune,
-    split_rows,
     sublevel,
     superlevel,
 )
@@ -58,6 +56,7 @@ def controllable(h, g0, gm, g1, b_knot, b_mid, floors, lims, end_kind, end_p1, e
     probe_lo = np.empty(MAX_LEVELS * FINE_PROBES)
     grid = np.empty(MAX_LEVELS * FINE_PROBES)
     probes = np.empty(WIDE_PROBES + FOCUS_PROBES)
+    keys = np.zeros(KEY_PROBES)  # a = 0 (reach_sets.levels)
     up = np.empty((ROWS_PER_CELL + 2, 3))
     down = np.empty((ROWS_PER_CELL + 2, 3))
     bounds = np.empty((ROWS_PER_CELL + 2, 3))
@@ -87,8 +86,8 @@ def controllable(h, g0, gm, g1, b_knot, b_mid, floors, lims, end_kind, end_p1, e
             nu = prune(up, nu, 1.0, a_lo, a_hi, b_hi)
             nd = prune(down, nd, -1.0, a_lo, a_hi, b_hi)
         m = levels((up, down, bounds, nu, nd, nb, a_min, a_max), h[j], chain, nc, peak, valley,
-                   probes[:p_n], acc, lev_a[j], lev_hi[j], lev_lo[j], probe_hi, probe_lo, grid,
-                   level, idx)
+                   probes[:p_n], keys, acc, lev_a[j], lev_hi[j], lev_lo[j], probe_hi, probe_lo,
+                   grid, level, idx)
         lev_n[j] = m
         if m == 0:
             return j

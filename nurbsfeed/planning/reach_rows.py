@@ -34,9 +34,10 @@ PLANAR_REL = 1e-9  # K_s's part along B below this share of |K_s|: none
 ZERO_REL = 1e-12  # an axis whose share of T, K and K_s is below this has no rows
 B_FLOOR = 1e-12  # the least linearisation point
 # per point at most: cap, b >= 0, 2 tangential accelerations, 6 axis accelerations, the normal
-# jerk's half polygon, 2 tangential and 6 axis jerks; per cell three points and two floors
+# jerk's half polygon, 2 tangential and 6 axis jerks; per cell three points, the middle control
+# point's two bounds and two floors
 ROWS_PER_POINT = 2 + 2 + 6 + NORMAL_SIDES // 2 + 1 + 2 + 6
-ROWS_PER_CELL = 3 * ROWS_PER_POINT + 3
+ROWS_PER_CELL = 3 * ROWS_PER_POINT + 4
 
 
 @jit
@@ -147,6 +148,9 @@ def cell_rows(g0, gm, g1, h, b0, bm, b1, floor0, floor1, lim, rows):
     # its ends under theirs, b stays under the caps all along the cell, not just at the three
     # points (a cell ending at the cap, its middle just below, bulges over it in between)
     r = _put(rows, r, 1.0, 0.0, 0.0, min(g0[G_CAP], gm[G_CAP], g1[G_CAP]), h, 0.0, 0.0)
+    # ... and at least 0: b >= 0 at the three points leaves room for a dive to nearly 0 and
+    # back between them (v a hundredth of its ends'), which no period-long law step follows
+    r = _put(rows, r, -1.0, 0.0, 0.0, 0.0, h, 0.0, 0.0)
     if floor0 > 0.0:
         r = _put(rows, r, -1.0, 0.0, 0.0, -floor0, 0.0, 0.0, 0.0)
     if floor1 > 0.0:

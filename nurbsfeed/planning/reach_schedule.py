@@ -305,8 +305,8 @@ def plan_schedule(layout: Layout, lim: Limits, start: np.ndarray | None = None,
     """The schedule on `layout` under `lim` (module docstring): linearised first at start
     (coefficients (C,); by default the speed estimate, and where a seed (xi (K,), c (K,))
     covers the coefficients, its). slack (share, mm): every limit within that distance of a
-    moving start loosened by that share, for a start in a state the limits there leave no
-    way on from (planning.path_plan)."""
+    moving end loosened by that share, for an end in a state the limits there leave no way
+    on from (or to) (planning.path_plan)."""
     lin = _estimate(layout, lim) if start is None else np.array(start)
     motion = np.full(lin.size, start is not None)
     seeded = np.zeros(lin.size, dtype=bool)
@@ -321,8 +321,12 @@ def plan_schedule(layout: Layout, lim: Limits, start: np.ndarray | None = None,
     motion[layout.fixed_index] = True
     limits = limits_vector(lim)
     near = np.zeros(layout.cells.shape[0], dtype=bool)
-    if slack[0] > 0.0 and layout.moving[0]:
-        near = layout.s_mm[layout.cell_node] <= layout.s_mm[0] + slack[1]
+    if slack[0] > 0.0:
+        at = layout.s_mm[layout.cell_node]
+        if layout.moving[0]:
+            near |= at <= layout.s_mm[0] + slack[1]
+        if layout.moving[1]:
+            near |= at >= layout.s_mm[-1] - slack[1]
     lims = np.repeat(limits[None, :], layout.cells.shape[0], axis=0)
     lims[near, :3] *= 1.0 + slack[0]
     lims[near, 4:] *= 1.0 + slack[0]
@@ -360,7 +364,7 @@ def _schedule(layout: Layout, lim: Limits, c: np.ndarray, passes: int, solved: b
     cell_ratios(c, layout.cells, layout.between, np.array(BETWEEN), lim.jerk_mm_s3,
                 lim.acc_mm_s2, lim.normal_jerk_mm_s3, acc_x, vel_x, jerk_x, lim.period_s,
                 between)
-    # what the slack near a moving start allows is no slowdown: an acceleration's share is the
+    # what the slack near a moving end allows is no slowdown: an acceleration's share is the
     # square of one
     for r in (ratios, between):
         r[near] /= (1.0 + slack_rel) ** 0.5

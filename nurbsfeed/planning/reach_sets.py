@@ -27,6 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from nurbsfeed.jit import jit
+from nurbsfeed.planning.reach_bounds import GAP_TOL_REL, b_bounds
 
 WIDE_PROBES = 12  # accelerations every set is probed at, evenly over [-A_t, A_t] ...
 # ... and, once a motion is known, this many more within FOCUS_REL A_t of its acceleration,
@@ -34,7 +35,10 @@ WIDE_PROBES = 12  # accelerations every set is probed at, evenly over [-A_t, A_t
 # concave boundary: the closer the levels, the less of it they cut off)
 FOCUS_PROBES = 12
 FOCUS_REL = 0.15
-MAX_LEVELS = WIDE_PROBES + FOCUS_PROBES + 2
+# and always at a = 0, where it lies inside the set's range: a cruise at a cap tops its set in
+# a corner there, which a chord between two levels either side cuts off (1.6 % of b at 1 mm/s)
+KEY_PROBES = 1
+MAX_LEVELS = WIDE_PROBES + FOCUS_PROBES + 2 + KEY_PROBES
 FINE_PROBES = 8  # times as many probes, evenly, where none meets the set
 NEWTON_STEPS = 40
 BISECTIONS = 50  # where Newton's method meets a kink it cannot step over
@@ -43,130 +47,10 @@ BISECTIONS = 50  # where Newton's method meets a kink it cannot step over
 WARM_REL = 5e-3
 RANGE_TOL_REL = 2e-3  # of the acceleration scale: how closely a set's range ends are found
 ROUNDING_REL = 1e-12  # of b: where the chain's peak is met exactly, rounding aside
-GAP_TOL_REL = 1e-9  # of the acceleration scale: a gap this far below 0 still counts as met
 # the stored boundaries move this share of b into the set: the forward pass lands on them, and
 # a state on an edge must keep a way on within rounding
 SHRINK_REL = 1e-7
 INFEASIBLE = -1.0
-# a moving end is met within this share of its b: its set is a line, kept this thick
-MOVING_END_REL = 1e-6
-# ... or, for the reachable sets (what they give is a bound, not a motion), this much
-LOOSE_END_REL = 1e-3
-
-
-@jit
-def split_rows(rows, n, h, up, down, bounds):
-    """A cell's rows (n, 4) (cb b + ca a + cu u <= d) arranged for the levels: a row with u
-    bounds a1 = a + h u by p + q a + s b, from above where its u coefficient is positive
-    (into up (U, 3) as (p, q, s)), from below where negative (into down); a row without u
-    bounds b by alpha + beta a (into bounds (B, 3) as (sign, alpha, beta): sign 1 above,
-    -1 below) or a alone. Returns (U, D, B, a_min, a_max): the range of a the last ones
-    leave (a_min > a_max: none)."""
-    nu = 0
-    nd = 0
-    nb = 0
-    a_min = -np.inf
-    a_max = np.inf
-    for r in range(n):
-        cb, ca, cu, d = rows[r, 0], rows[r, 1], rows[r, 2], rows[r, 3]
-        if cu != 0.0:
-            p = h * d / cu
-            q = 1.0 - h * ca / cu
-            s = -h * cb / cu
-            if cu > 0.0:
-                up[nu, 0], up[nu, 1], up[nu, 2] = p, q, s
-                nu += 1
-            else:
-                down[nd, 0], down[nd, 1], down[nd, 2] = p, q, s
-                nd += 1
-        elif cb != 0.0:
-            bounds[nb, 0] = 1.0 if cb > 0.0 else -1.0
-            bounds[nb, 1] = d / cb
-            bounds[nb, 2] = -ca / cb
-            nb += 1
-        elif ca > 0.0:
-            a_max = min(a_max, d / ca)
-        elif ca < 0.0:
-            a_min = max(a_min, d / ca)
-        elif d < -GAP_TOL_REL * abs(d):
-            a_min, a_max = 1.0, -1.0
-    return nu, nd, nb, a_min, a_max
-
-
-@jit
-def _box_value(rows, r, sign, a, b):
-    return sign * (rows[r, 0] + rows[r, 1] * a + rows[r, 2] * b)
-
-
-@jit
-def prune(rows, n, sign, a_lo, a_hi, b_hi):
-    """Drops the bounds on a1 (rows (n, 3) as `split_rows` gives them: from above with sign 1,
-    from below with sign -1) that another one is tighter than everywhere in the box a in
-    [a_lo, a_hi], b in [0, b_hi] (where this knot's set lies), keeping the order of the rest;
-    returns their count. Of some 19 bounds a side a cell's set meets some 5: every level reads
-    them all a few times. A bound is linear, so one tighter at the box's corners is tighter
-    all over it; the bounds tried as the tighter one are those tightest at a corner or the
-    middle (each of them stays)."""
-    if n <= 1:
-        return n
-    corners_a = (a_lo, a_lo, a_hi, a_hi, 0.5 * (a_lo + a_hi))
-    corners_b = (0.0, b_hi, 0.0, b_hi, 0.5 * b_hi)
-    best = np.empty(5, dtype=np.int64)
-    for c in range(5):
-        k = 0
-        for r in range(1, n):
-            if _box_value(rows, r, sign, corners_a[c], corners_b[c]) < _box_value(
-                    rows, k, sign, corners_a[c], corners_b[c]):
-                k = r
-        best[c] = k
-    # the tightest rows' values at the corners, kept aside: compaction overwrites the rows
-    tight = np.empty((5, 4))
-    for c in range(5):
-        for e in range(4):
-            tight[c, e] = _box_value(rows, best[c], sign, corners_a[e], corners_b[e])
-    m = 0
-    for r in range(n):
-        dominated = False
-        for c in range(5):
-            if best[c] == r:
-                dominated = False
-                break
-            if not dominated:
-                tighter = True
-                for e in range(4):
-                    if not tight[c, e] <= _box_value(rows, r, sign, corners_a[e], corners_b[e]):
-                        tighter = False
-                        break
-                dominated = tighter
-        if not dominated:
-            for i in range(3):
-                rows[m, i] = rows[r, i]
-            m += 1
-    return m
-
-
-@jit
-def b_top(bounds, nb, a_lo, a_hi):
-    """An upper bound on b over a in [a_lo, a_hi] from the rows without u (inf: none)."""
-    top = np.inf
-    for r in range(nb):
-        if bounds[r, 0] > 0.0:
-            top = min(top, bounds[r, 1] + max(bounds[r, 2] * a_lo, bounds[r, 2] * a_hi))
-    return top
-
-
-@jit
-def _b_bounds(bounds, nb, a):
-    """The bounds on b of the rows without u at acceleration a: (low, high)."""
-    low = 0.0
-    high = np.inf
-    for r in range(nb):
-        v = bounds[r, 1] + bounds[r, 2] * a
-        if bounds[r, 0] > 0.0:
-            high = min(high, v)
-        else:
-            low = max(low, v)
-    return low, high
 
 
 @jit
@@ -353,11 +237,11 @@ def _guess(chain, row, nc, h, a):
 def _level(cell, a, h, chain, nc, peak, valley, scale, level, idx):
     """(high, low): the greatest and least b at acceleration a from which the cell's rows lead
     into the next knot's set; INFEASIBLE twice where none does. cell = (up, down, bounds, U,
-    D, B, a_min, a_max) as `split_rows` gives them; level (4, R): scratch."""
+    D, B, a_min, a_max) as `reach_bounds.split_rows` gives them; level (4, R): scratch."""
     up, down, bounds, nu, nd, nb, a_min, a_max = cell
     if a < a_min or a > a_max:
         return INFEASIBLE, INFEASIBLE
-    low, high = _b_bounds(bounds, nb, a)
+    low, high = b_bounds(bounds, nb, a)
     if low > high:
         return INFEASIBLE, INFEASIBLE
     if nc == 0 and nu + nd == 0:
@@ -469,13 +353,38 @@ def _refine(cell, h, chain, nc, peak, valley, inside, outside, hi, lo, guess, sc
 
 
 @jit
-def levels(cell, h, chain, nc, peak, valley, probes, acc, lev_a, lev_hi, lev_lo, probe_hi,
-           probe_lo, grid, level, idx):
-    """The levels of one knot's set into lev_a, lev_hi, lev_lo (probes + 2,): the set at the
-    accelerations probes (P,) (ascending; FINE_PROBES times as many evenly over [-acc, acc]
-    where none meets the set, in grid), the ends of the feasible ones refined against their
-    infeasible neighbours; a set that half the probes miss gets its levels again, evenly
-    over its refined range. Returns the number of levels (0: the set is empty)."""
+def levels(cell, h, chain, nc, peak, valley, probes, keys, acc, lev_a, lev_hi, lev_lo,
+           probe_hi, probe_lo, grid, level, idx):
+    """The levels of one knot's set into lev_a, lev_hi, lev_lo (probes + 2 + keys,): the set
+    at the accelerations probes (P,) (ascending; FINE_PROBES times as many evenly over [-acc,
+    acc] where none meets the set, in grid), the ends of the feasible ones refined against
+    their infeasible neighbours; a set that half the probes miss gets its levels again, evenly
+    over its refined range; and a level at each of keys (NaN: none) inside that range. Returns
+    the number of levels (0: the set is empty)."""
+    m = _spread(cell, h, chain, nc, peak, valley, probes, acc, lev_a, lev_hi, lev_lo,
+                probe_hi, probe_lo, grid, level, idx)
+    for key in keys:
+        if not (m > 1 and lev_a[0] < key < lev_a[m - 1]):
+            continue
+        k = 0
+        while lev_a[k] < key:
+            k += 1
+        if lev_a[k] == key:
+            continue
+        hi, lo = _level(cell, key, h, chain, nc, peak, valley, acc, level, idx)
+        if hi < 0.0:
+            continue
+        for i in range(m, k, -1):
+            lev_a[i], lev_hi[i], lev_lo[i] = lev_a[i - 1], lev_hi[i - 1], lev_lo[i - 1]
+        _store(lev_a, lev_hi, lev_lo, k, key, hi, lo)
+        m += 1
+    return m
+
+
+@jit
+def _spread(cell, h, chain, nc, peak, valley, probes, acc, lev_a, lev_hi, lev_lo, probe_hi,
+            probe_lo, grid, level, idx):
+    """`levels` but the keys."""
     p_n = probes.size
     scale = acc
     points = probes
@@ -551,43 +460,3 @@ def probes_around(acc, wide, focus, centre, half_width, out):
             out[n] = x
             n += 1
     return n
-
-
-@jit
-def fold_end(rows, n, h, end_kind, p1, p2, out):
-    """The last cell's rows with its u fixed by the end it runs into, as rows over (b, a) alone
-    (u = 0 in them) into out; returns the count. end_kind 0: a rest after a rest cell p1 long
-    whose far value is at most p2 (b = b_end y^(4/3): at the knot a = -2 b / (3 p1), so
-    u = -(b + (2 h + 1.5 p1) a) / (h^2 + 1.5 p1 h)); 1: a moving end in state (b, a) = (p1,
-    p2) (u = (p2 - a) / h, and b = p1 - h (a + p2), two rows, MOVING_END_REL apart; 2: the
-    same, LOOSE_END_REL apart)."""
-    if end_kind == 0:
-        den = h * h + 1.5 * p1 * h
-        pb, pa, p0 = -1.0 / den, -(2.0 * h + 1.5 * p1) / den, 0.0
-    else:
-        pb, pa, p0 = 0.0, -1.0 / h, p2 / h
-    m = 0
-    for r in range(n):
-        cu = rows[r, 2]
-        out[m, 0] = rows[r, 0] + cu * pb
-        out[m, 1] = rows[r, 1] + cu * pa
-        out[m, 2] = 0.0
-        out[m, 3] = rows[r, 3] - cu * p0
-        m += 1
-    if end_kind == 0:
-        # the far value b + 2 h a + h^2 u of the rest cell: at most p2, at least 0
-        for sign, bound in ((1.0, p2), (-1.0, 0.0)):
-            out[m, 0] = sign * (1.0 + h * h * pb)
-            out[m, 1] = sign * (2.0 * h + h * h * pa)
-            out[m, 2] = 0.0
-            out[m, 3] = sign * bound
-            m += 1
-    else:
-        thick = (MOVING_END_REL if end_kind == 1 else LOOSE_END_REL) * max(abs(p1), 1e-300)
-        for sign in (1.0, -1.0):
-            out[m, 0] = sign
-            out[m, 1] = sign * h
-            out[m, 2] = 0.0
-            out[m, 3] = sign * (p1 - h * p2) + thick
-            m += 1
-    return m

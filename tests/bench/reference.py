@@ -6,7 +6,7 @@ the repository root:
 
 Each curve is planned under two settings, both on the path model: the default profile
 (configs/default.yaml: path and per-axis limits) and paper-table1's limits with `jerk_model:
-path`; under each by the path planner (`planner: optimal`, the default's, docs/design.md §2e)
+path`; under each by the path planner (`planner: optimal`, the default's, docs/design.md §2d)
 and by the S-curve planner (`planner: scurve`, the paper's key points and S-curves), each plan
 as a conversion makes it (`pipeline.verified_plan`: its points read and the law slowed where
 they ask). Beside each plan stand:
