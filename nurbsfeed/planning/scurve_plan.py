@@ -1,4 +1,4 @@
-"""The S-curve planner (`planner: scurve`: the paper model's, and the envelope planner's
+"""The S-curve planner (`planner: scurve`: the paper model's, and the path planner's
 fallback): key points, nominal speeds, bidirectional scan, S-curve segments, limits
 everywhere, whole periods (design §2).
 

@@ -19,7 +19,7 @@
    with the input (the reader streams).
 4. Cold start: `nurbsfeed convert` of a small sample with a warm numba cache (median of 5).
 5. Phases: per curve of the samples and the butterfly under the default profile, in one
-   process with a warm cache, the time to plan (`pipeline.plan_block`, the envelope's check of
+   process with a warm cache, the time to plan (`pipeline.plan_block`, the verification's look at
    its points included), to step (`interpolate.stepping.Stepping`) and to write (`MoveWriter`),
    side by side, median of PHASE_RUNS.
 Speed is measured here, never asserted in the test suite.
