@@ -33,7 +33,7 @@ F = TypeVar("F", bound=Callable[..., object])
 
 # seconds the first conversion after an install takes on a 2-core machine (an empty cache)
 # (the butterfly, default profile; `python -m tests.bench.first_run`, docs/benchmarks.md)
-FIRST_COMPILE_S = 15.0
+FIRST_COMPILE_S = 30.0
 
 
 def _numba_njit() -> Callable[[F], F] | None:

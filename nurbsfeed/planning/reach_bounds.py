@@ -75,7 +75,7 @@ def prune(rows, n, sign, a_lo, a_hi, b_hi):
     corners_b = (0.0, b_hi, 0.0, b_hi, 0.5 * b_hi)
     best = np.empty(5, dtype=np.int64)
     for c in range(5):
-        k = 0
+        k = np.int64(0)  # (a literal 0 compiles _box_value a second time)
         for r in range(1, n):
             if _box_value(rows, r, sign, corners_a[c], corners_b[c]) < _box_value(
                     rows, k, sign, corners_a[c], corners_b[c]):

@@ -141,7 +141,7 @@ def cell_rows(g0, gm, g1, h, b0, bm, b1, floor0, floor1, lim, rows):
     linearised at b0, bm, b1 there) over its start state (b, a) and u, into rows
     (ROWS_PER_CELL, 4); floors b >= floor0 at its start and b >= floor1 at its end (0: none).
     Returns the row count."""
-    r = point_rows(g0, b0, lim, True, 0.0, 0.0, 0.0, rows, 0)
+    r = point_rows(g0, b0, lim, True, 0.0, 0.0, 0.0, rows, np.int64(0))  # not a literal 0
     r = point_rows(gm, bm, lim, True, h, 0.25 * h * h, 0.5 * h, rows, r)
     r = point_rows(g1, b1, lim, True, 2.0 * h, h * h, h, rows, r)
     # the quadratic's middle control point b + h a under the lowest of the three caps: with

@@ -258,12 +258,12 @@ def _level(cell, a, h, chain, nc, peak, valley, scale, level, idx):
         low = max(low, chain[2, valley] - h * a)
     if low > high:
         return INFEASIBLE, INFEASIBLE
-    guess = _guess(chain, 1, nc, h, a)
+    guess = _guess(chain, np.int64(1), nc, h, a)  # (a literal: another compilation)
     start = high if guess < 0.0 else min(max(guess * (1.0 + WARM_REL), low), high)
     top = _upper_end(level, nu, nd, a, h, chain, nc, peak, valley, idx, low, high, start, tol)
     if top < 0.0:
         return INFEASIBLE, INFEASIBLE
-    guess = _guess(chain, 2, nc, h, a)
+    guess = _guess(chain, np.int64(2), nc, h, a)
     start = low if guess < 0.0 else min(max(guess * (1.0 - WARM_REL), low), top)
     return top, _lower_end(level, nu, nd, a, h, chain, nc, peak, valley, idx, low, top, start,
                            tol)
@@ -366,7 +366,7 @@ def levels(cell, h, chain, nc, peak, valley, probes, keys, acc, lev_a, lev_hi, l
     for key in keys:
         if not (m > 1 and lev_a[0] < key < lev_a[m - 1]):
             continue
-        k = 0
+        k = np.int64(0)  # not a literal: one compilation of what it is passed to
         while lev_a[k] < key:
             k += 1
         if lev_a[k] == key:
@@ -409,7 +409,7 @@ def _spread(cell, h, chain, nc, peak, valley, probes, acc, lev_a, lev_hi, lev_lo
     if last < count - 1:
         a1, hi1, lo1 = _refine(cell, h, chain, nc, peak, valley, a1, points[last + 1], hi1,
                                lo1, ends_a[1], scale, level, idx)
-    m = 0
+    m = np.int64(0)  # (a literal 0 compiles _store a second time)
     if count == p_n and last - first + 1 >= p_n // 2:
         if a0 < points[first]:
             _store(lev_a, lev_hi, lev_lo, m, a0, hi0, lo0)
