@@ -337,3 +337,24 @@ def test_a_reversal_just_after_a_knot_where_c_prime_vanishes_is_a_rest(tmp_path:
     assert np.any(plan.key_u == 0.5)
     outcome = check_case(tmp_path, "in.ngc", CUSP_KNOT.read_bytes())
     assert outcome.problem is None, outcome.problem
+
+
+@pytest.mark.parametrize(("name", "check_motion"), [
+    ("slow-degree-one-curves.json", False),
+    ("coincident-first-points-inch.json", True),
+    ("jerk-vector-refused.ngc", True),
+])
+def test_the_path_planners_former_findings_convert_and_check_clean(tmp_path: Path, name: str,
+                                                                  check_motion: bool) -> None:
+    """Fuzz seeds 63, 53 and 52 under the default profile: three degree-1 rational curves at
+    0.35 and 0.67 mm/s (146 s of motion) took 13 s, past the fuzz's 10 s, while the banded
+    programs grew with the curve's duration; a degree-4 inch curve whose first two control
+    points coincide took over 200 s in the S-curve plan's check against the path model; a
+    G-code program the motion guard refused (a jerk vector of 243,000 mm/s^3 from the points)
+    under every planner then. The reachability passes plan all three: exit 0, the oracle's
+    property, and `check` clean on the two short ones (the long one's 145,000 points are the
+    fuzz's own check's share)."""
+    source = ROOT / "tests" / "data" / "path_planner" / name
+    outcome = check_case(tmp_path, "in" + source.suffix, source.read_bytes(),
+                         check_motion=check_motion)
+    assert outcome.exit_code == 0 and outcome.problem is None, outcome
