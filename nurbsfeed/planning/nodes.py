@@ -28,15 +28,22 @@ from nurbsfeed.planning.path_check import arc_parameters
 CELL_PERIODS = 4.0  # a cell lasting longer at the speed estimate is cut
 RECUT_SLACK = 2.0  # ... and one the schedule spends over this many times as long in, again
 MAX_CUT = 64  # pieces a cell is cut into at most in one go
-# a grid node closer than this many periods at the speed estimate to the last one kept goes
+# a grid node closer than this many periods (at the speed estimate, or the jerk's speed through
+# the curvature where that is lower) to the last one kept goes
 # (curvature maxima, knots, stops and the ends always stay): cells far shorter than a period
 # are finer than anything the machine's positions show, they make rows that ask u to follow
 # kappa^2 b to a millionth (a 3 um near cusp), and each costs the passes as much as a long one
-MIN_CELL_PERIODS = 1.0
+MIN_CELL_PERIODS = 2.0
 # ... unless the curvature across the merged cell changes by more than this factor (kappa
 # below kappa_0, where it sets no limit, counts as kappa_0): in a valley the rows must see the
 # curvature change to plan its bottom
 MERGE_KAPPA_RATIO = 1.25
+# ... and where the speed cells are sized at changes by more than this factor across it (the
+# motion speeds up or brakes there), nodes stay BRAKE_CELL_PERIODS apart: the jerk-limited motion
+# changes its jerk within a few periods there, and the quadratic a longer cell holds cuts
+# those corners (the short legs of a 3 mm star, 1.1 % slower with two-period cells)
+MERGE_SPEED_RATIO = 1.1
+BRAKE_CELL_PERIODS = 1.0
 MIN_CELL_REL = 1e-6  # of the curve's length: nodes closer than this are one
 MIN_STRETCH_CELLS = 4  # a stretch between rests has at least this many cells
 REST_CELL_SHARE = 0.05  # of A^3 / (6 J^2): the first cell beside a rest at most ...
@@ -65,6 +72,34 @@ def _topp_passes(b, h, slope):
         b[i] = min(b[i], b[i + 1] + slope * h[i])
 
 
+@jit
+def _merge(s_mm, period_mm, kappa, essential, rest, floor, keep):
+    """Which grid nodes stay (keep (N,), all True on entry): the rules of MIN_CELL_PERIODS and
+    the two after it; period_mm (N,): the length of a period at the speed cells are sized at."""
+    kept = 0
+    lo_k = hi_k = kappa[0]
+    lo_v = hi_v = period_mm[0]
+    for k in range(1, s_mm.size):
+        gap = s_mm[k] - s_mm[kept]
+        lo_k, hi_k = min(lo_k, kappa[k]), max(hi_k, kappa[k])
+        lo_v, hi_v = min(lo_v, period_mm[k]), max(hi_v, period_mm[k])
+        periods = gap / max(min(period_mm[k], period_mm[kept]), 1e-300)
+        if gap >= floor and (essential[k] or periods >= MIN_CELL_PERIODS
+                             or hi_k > MERGE_KAPPA_RATIO * lo_k
+                             or (periods >= BRAKE_CELL_PERIODS
+                                 and hi_v > MERGE_SPEED_RATIO * lo_v)):
+            kept = k
+            lo_k = hi_k = kappa[k]
+            lo_v = hi_v = period_mm[k]
+        elif (k == s_mm.size - 1 or rest[k]) and kept > 0 and not rest[kept]:
+            keep[kept] = False  # a rest and the end stay: the node before them goes
+            kept = k
+            lo_k = hi_k = kappa[k]
+            lo_v = hi_v = period_mm[k]
+        else:
+            keep[k] = False
+
+
 def schedule_nodes(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.ndarray,
                    cap_mm_s: np.ndarray, kappa_floor: float,
                    keep_u: np.ndarray = np.empty(0), max_nodes: int = 2**62,
@@ -90,23 +125,16 @@ def schedule_nodes(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.nd
     essential[np.isin(u, curve.span_breaks)] = True
     essential[np.isin(u, keep_u)] = True
     floor = MIN_CELL_REL * max(float(s_mm[-1]), 1e-300)
-    short = np.maximum(MIN_CELL_PERIODS * lim.period_s * np.asarray(v_limit, dtype=float), floor)
     kappa = np.maximum(np.nan_to_num(grid.kappa_1_mm, posinf=1e300), kappa_floor)
     keep = np.ones(s_mm.size, dtype=bool)
-    kept = 0
-    lo_k = hi_k = kappa[0]
-    for k in range(1, s_mm.size):
-        gap = s_mm[k] - s_mm[kept]
-        lo_k, hi_k = min(lo_k, kappa[k]), max(hi_k, kappa[k])
-        if gap >= floor and (essential[k] or gap >= min(short[k], short[kept])
-                             or hi_k > MERGE_KAPPA_RATIO * lo_k):
-            kept = k
-            lo_k = hi_k = kappa[k]
-        elif (k == s_mm.size - 1 or rest[k]) and kept > 0 and not rest[kept]:
-            keep[kept] = False  # a rest and the end stay: the node before them goes
-            kept = k
-        else:
-            keep[k] = False
+    # cells are sized at the speed estimate, but at most at the speed whose pass through the
+    # curvature turns the velocity with the jerk limit (|r'''| >= v^3 kappa^2 at constant
+    # speed): the estimate knows no jerk, and at a slow tip its periods would be several of
+    # the motion's
+    kappa_1 = np.minimum(np.nan_to_num(grid.kappa_1_mm, posinf=1e150), 1e150)
+    turn = (_moving_limits(curve, lim)[1] / np.maximum(kappa_1, 1e-150) ** 2) ** (1.0 / 3.0)
+    _merge(s_mm, np.minimum(np.asarray(v_limit, dtype=float), turn) * lim.period_s, kappa,
+           essential, rest, floor, keep)
     s_mm, u, rest, v = s_mm[keep], u[keep], rest[keep], np.asarray(v_limit, dtype=float)[keep]
     rests = np.flatnonzero(rest)
     extra = [np.linspace(s_mm[a], s_mm[b], MIN_STRETCH_CELLS + 1)[1:-1]
