@@ -36,7 +36,7 @@ from nurbsfeed.planning.reach_pass import (
     motion_time,
 )
 from nurbsfeed.planning.reach_rows import B_FLOOR, ROWS_PER_CELL, cell_rows, jerk_tangent
-from nurbsfeed.planning.reach_sets import sublevel, superlevel
+from nurbsfeed.planning.reach_sets import level_interval
 
 DEFAULT = load_machine("default")
 # a cubic out of the plane (the normal jerk's polygon rows), 30 mm: 114 cells under the default
@@ -75,7 +75,7 @@ def interval_at_least(x: np.ndarray, y: np.ndarray, c: float) -> tuple[float, fl
 @settings(max_examples=300, deadline=None, derandomize=True)
 @given(chains(), st.lists(st.integers(-3, 13), min_size=4, max_size=4))
 def test_a_chains_level_interval_is_where_it_is_above_or_below_the_level(chain_xy, warm) -> None:
-    """superlevel (sublevel): [lo, hi] is where the concave (convex) chain is >= c (<= c), its
+    """level_interval, sign 1 (-1): [lo, hi] is where the concave (convex) chain is >= c (<= c), its
     ends where the chain crosses c, exactly the peak's a1 at c on the peak, empty above it; dlo /
     dc and dhi / dc are the central differences of the brute force's ends (c nowhere near a
     point's value); and where the last searches ended (idx, any values) changes nothing."""
@@ -88,11 +88,10 @@ def test_a_chains_level_interval_is_where_it_is_above_or_below_the_level(chain_x
         y = sign * chain[row]
         levels = [y[top] - t * (y[top] - y.min() + 1.0) for t in (0.0, 0.1, 0.37, 0.5, 0.9, 1.0)]
         for c in [*levels, *y]:
-            args = (chain, row, n, top, sign * c)
-            kernel = superlevel if sign > 0 else sublevel
-            lo, hi, dlo, dhi = kernel(*args, np.array([top] * 4, dtype=np.int64))
+            args = (chain, row, n, top, sign * c, sign)
+            lo, hi, dlo, dhi = level_interval(*args, np.array([top] * 4, dtype=np.int64))
             for start in (np.array(warm, dtype=np.int64), np.zeros(4, dtype=np.int64)):
-                assert kernel(*args, start) == (lo, hi, dlo, dhi)
+                assert level_interval(*args, start) == (lo, hi, dlo, dhi)
             want = interval_at_least(x, y, c)
             assert (lo, hi) == pytest.approx(want, rel=1e-12, abs=1e-12)
             if c == y[top] and np.sum(y == c) == 1:  # a strict peak
@@ -103,7 +102,8 @@ def test_a_chains_level_interval_is_where_it_is_above_or_below_the_level(chain_x
                 for d_kernel, k in ((dlo, 0), (dhi, 1)):
                     fd = sign * (up[k] - down[k]) / (2.0 * delta)
                     assert d_kernel == pytest.approx(fd, rel=1e-5, abs=1e-6)
-        lo, hi, _, _ = kernel(chain, row, n, top, sign * (y[top] + 1.0), np.zeros(4, np.int64))
+        lo, hi, _, _ = level_interval(chain, row, n, top, sign * (y[top] + 1.0), sign,
+                                      np.zeros(4, np.int64))
         assert lo > hi
 
 

@@ -28,11 +28,11 @@ from nurbsfeed.planning.reach_sets import (
     MAX_LEVELS,
     WIDE_PROBES,
     chain_of,
+    level_interval,
     levels,
     probes_around,
-    sublevel,
-    superlevel,
 )
+from nurbsfeed.planning.schedule import GAUSS_W, GAUSS_X
 
 END_REST, END_MOVING, END_MOVING_LOOSE = 0, 1, 2
 FORWARD_TOL_REL = 1e-9  # a row the forward pass's state breaks by less than this share holds
@@ -207,8 +207,9 @@ def forward(h, g0, gm, g1, b_knot, b_mid, floors, lims, start_kind, start_p1, st
             nc, peak, valley = chain_of(lev_a[j + 1], lev_hi[j + 1], lev_lo[j + 1],
                                         lev_n[j + 1], hj, chain, idx)
             c = min(b + hj * a, chain[1, peak])
-            lo1, hi1, _, _ = superlevel(chain, 1, nc, peak, c, idx)
-            lo2, hi2, _, _ = sublevel(chain, 2, nc, valley, max(c, chain[2, valley]), idx)
+            lo1, hi1, _, _ = level_interval(chain, 1, nc, peak, c, 1.0, idx)
+            lo2, hi2, _, _ = level_interval(chain, 2, nc, valley, max(c, chain[2, valley]), -1.0,
+                                            idx)
             low = max(low, (max(lo1, lo2) - a) / hj)
             high = min(high, (min(hi1, hi2) - a) / hj)
             tol = U_TOL_REL * (abs(low) + abs(high) + 1.0)
@@ -299,12 +300,8 @@ def highest(ka, khi, klo, kn, ra, rhi, rlo, rn, out):
 @jit
 def motion_time(h, b, a, start_h, end_h):
     """The time of a stretch's motion (b, a) (Q + 1,) at its knots: each cell's b = b + 2 a x +
-    u x^2 by 8-point Gauss-Legendre on 1 / sqrt(b), and each rest cell's 3 h / sqrt(b) (0 h:
-    a moving end, none)."""
-    gx = (-0.9602898564975363, -0.7966664774136267, -0.5255324099163290, -0.1834346424956498,
-          0.1834346424956498, 0.5255324099163290, 0.7966664774136267, 0.9602898564975363)
-    gw = (0.1012285362903763, 0.2223810344533745, 0.3137066458778873, 0.3626837833783620,
-          0.3626837833783620, 0.3137066458778873, 0.2223810344533745, 0.1012285362903763)
+    u x^2 by Gauss-Legendre on 1 / sqrt(b) (schedule.cell_times' points), and each rest
+    cell's 3 h / sqrt(b) (0 h: a moving end, none)."""
     q_n = h.size
     total = 0.0
     if start_h > 0.0:
@@ -315,9 +312,9 @@ def motion_time(h, b, a, start_h, end_h):
         hj = h[j]
         u = (a[j + 1] - a[j]) / hj
         t = 0.0
-        for g in range(8):
-            x = 0.5 * hj * (gx[g] + 1.0)
+        for g in range(GAUSS_X.size):
+            x = 0.5 * hj * (GAUSS_X[g] + 1.0)
             bx = b[j] + x * (2.0 * a[j] + u * x)
-            t += gw[g] / math.sqrt(max(bx, 1e-300))
+            t += GAUSS_W[g] / math.sqrt(max(bx, 1e-300))
         total += 0.5 * hj * t
     return total

@@ -54,63 +54,41 @@ INFEASIBLE = -1.0
 
 
 @jit
-def superlevel(chain, row, n, peak, c, idx):
-    """The interval [lo, hi] of a1 where the concave chain (chain[0], chain[row]) (n points,
-    highest at peak) is >= c, and d lo / dc, d hi / dc; empty (lo > hi) when its peak is below
-    c. Each end is found from where it was last (idx[0], idx[1]: the sets' boundaries move
-    little between the evaluations of one knot) and interpolated from the point inside it, so
-    that c at the peak gives the peak's a1 exactly on both sides. (The chain is indexed, never
-    sliced: a slice's reference count costs more than the search.)"""
-    if chain[row, peak] < c:
-        return 1.0, -1.0, 0.0, 0.0
-    k = min(max(idx[0], 0), peak)
-    while k < peak and chain[row, k] < c:
-        k += 1
-    while k > 0 and chain[row, k - 1] >= c:
-        k -= 1
-    idx[0] = k
-    if k == 0:
-        lo, dlo = chain[0, 0], 0.0
-    else:
-        slope = (chain[0, k] - chain[0, k - 1]) / (chain[row, k] - chain[row, k - 1])
-        lo, dlo = chain[0, k] - (chain[row, k] - c) * slope, slope
-    k = min(max(idx[1], peak), n - 1)
-    while k > peak and chain[row, k] < c:
-        k -= 1
-    while k < n - 1 and chain[row, k + 1] >= c:
-        k += 1
-    idx[1] = k
-    if k == n - 1:
-        hi, dhi = chain[0, n - 1], 0.0
-    else:
-        slope = (chain[0, k + 1] - chain[0, k]) / (chain[row, k + 1] - chain[row, k])
-        hi, dhi = chain[0, k] + (c - chain[row, k]) * slope, slope
-    return lo, hi, dlo, dhi
+def _inside(v, c, sign):
+    """v on the level set's side of c: v >= c (sign 1) or v <= c (sign -1)."""
+    return v >= c if sign > 0.0 else v <= c
 
 
 @jit
-def sublevel(chain, row, n, valley, c, idx):
-    """The interval of a1 where the convex chain (chain[0], chain[row]) (lowest at valley) is
-    <= c, as `superlevel` (its ends' last places in idx[2], idx[3])."""
-    if chain[row, valley] > c:
+def level_interval(chain, row, n, extreme, c, sign, idx):
+    """The interval [lo, hi] of a1 where the chain (chain[0], chain[row]) (n points) is on
+    c's side: sign 1, the concave chain >= c (highest at extreme); sign -1, the convex one <=
+    c (lowest at extreme); and d lo / dc, d hi / dc. Empty (lo > hi) when its extreme is not.
+    Each end is found from where it was last (idx[0], idx[1] for sign 1, idx[2], idx[3] for
+    -1: the sets' boundaries move little between the evaluations of one knot) and interpolated
+    from the point inside it, so that c at the extreme gives the extreme's a1 exactly on both
+    sides. (The chain is indexed, never sliced: a slice's reference count costs more than the
+    search.)"""
+    if not _inside(chain[row, extreme], c, sign):
         return 1.0, -1.0, 0.0, 0.0
-    k = min(max(idx[2], 0), valley)
-    while k < valley and chain[row, k] > c:
+    slot = 0 if sign > 0.0 else 2
+    k = min(max(idx[slot], 0), extreme)
+    while k < extreme and not _inside(chain[row, k], c, sign):
         k += 1
-    while k > 0 and chain[row, k - 1] <= c:
+    while k > 0 and _inside(chain[row, k - 1], c, sign):
         k -= 1
-    idx[2] = k
+    idx[slot] = k
     if k == 0:
         lo, dlo = chain[0, 0], 0.0
     else:
         slope = (chain[0, k] - chain[0, k - 1]) / (chain[row, k] - chain[row, k - 1])
         lo, dlo = chain[0, k] - (chain[row, k] - c) * slope, slope
-    k = min(max(idx[3], valley), n - 1)
-    while k > valley and chain[row, k] > c:
+    k = min(max(idx[slot + 1], extreme), n - 1)
+    while k > extreme and not _inside(chain[row, k], c, sign):
         k -= 1
-    while k < n - 1 and chain[row, k + 1] <= c:
+    while k < n - 1 and _inside(chain[row, k + 1], c, sign):
         k += 1
-    idx[3] = k
+    idx[slot + 1] = k
     if k == n - 1:
         hi, dhi = chain[0, n - 1], 0.0
     else:
@@ -143,16 +121,16 @@ def _gap(level, nu, nd, a, b, h, chain, nc, peak, valley, idx):
     c = b + h * a
     top, bottom = chain[1, peak], chain[2, valley]
     rounding = ROUNDING_REL * (abs(c) + abs(top) + abs(bottom))
-    lo, hi, dlo, dhi = superlevel(chain, 1, nc, peak, min(c, top) if c - top <= rounding
-                                   else c, idx)
+    lo, hi, dlo, dhi = level_interval(chain, 1, nc, peak, min(c, top) if c - top <= rounding
+                                      else c, 1.0, idx)
     if lo > hi:
         return -np.inf, -1.0
     if hi < up:
         up, up_slope = hi, dhi
     if lo > dn:
         dn, dn_slope = lo, dlo
-    lo, hi, dlo, dhi = sublevel(chain, 2, nc, valley, max(c, bottom) if bottom - c
-                                 <= rounding else c, idx)
+    lo, hi, dlo, dhi = level_interval(chain, 2, nc, valley, max(c, bottom) if bottom - c
+                                      <= rounding else c, -1.0, idx)
     if lo > hi:
         return -np.inf, 1.0
     if hi < up:
