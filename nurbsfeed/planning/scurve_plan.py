@@ -98,7 +98,7 @@ def _whole_periods(v_key, key_t, key_node, limit, v_nodes, period_s, slowdown):
 
 @jit
 def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc, jerk,
-                  max_hold_s, cap_to_cruise):
+                  max_hold_s, cap_to_cruise, confine):
     """Steps 3-5: scan, segments, time law, then fix rounds until the law keeps the eroded
     limit at every node (or MAX_FIX_ROUNDS, or a round that changes nothing).
 
@@ -108,12 +108,13 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
     ("down") or in the cruise. Up: hold the start speed until the first such node; down: hold
     the end speed from the last one; cruise, or an end at rest, or holds that would leave less
     than HOLD_ROOM of the segment: cap the segment at the lowest limit of its fast nodes (with
-    cap_to_cruise, the path model's: of those a hold cannot help). Returns key speeds (K,), peak
-    speeds (K-1,), the law's pieces (timelaw.chain_segments), the law's speed at every node
-    where it could exceed the limit (M,; 0 at the others and at key nodes), the number of fix
-    rounds and, per segment (K-1,), where `plan_curve` should add a key point (a shoulder; -1:
-    none): the node where the law was too fast farthest from the key it leaves (nearest to the
-    key it comes to), when that key is at rest (a hold of speed 0 cannot help, so the segment's
+    cap_to_cruise, the path model's: of those a hold cannot help; confine: see the loop).
+    Returns key speeds (K,), peak speeds (K-1,), the law's pieces (timelaw.chain_segments), the
+    law's speed at every node where it could exceed the limit (M,; 0 at the others and at key
+    nodes), the number of fix rounds and, per segment (K-1,), where `plan_curve` should add a
+    key point (a shoulder; -1: none): the node where the law was too fast farthest from the key
+    it leaves (nearest to the key it comes to; confined, beside a rest, the end of the first run
+    of such nodes), when that key is at rest (a hold of speed 0 cannot help, so the segment's
     cap was lowered) or when the hold would last longer than max_hold_s (a key speed held over a
     long stretch of a steep limit: a near cusp); and, per segment, the stretch [from, to] of arc
     length where its peak speed hides between two nodes ((K-1, 2); NaN: none).
@@ -185,6 +186,10 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
             last_down = -np.inf
             last_up_node = -1
             first_down_node = -1
+            # the last node of the first run of too-fast nodes (consecutive), the first of the last
+            first_run_end = -1
+            last_run_start = -1
+            previous_bad = -2
             lowest = np.inf
             lowest_up = np.inf
             lowest_mid = np.inf
@@ -195,6 +200,11 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
             for node in range(key_node[seg] + 1, key_node[seg + 1]):
                 if v_nodes[node] <= limit[node] * (1.0 + SPEED_CHECK_REL_TOL):
                     continue
+                if first_run_end < 0 or node == first_run_end + 1:
+                    first_run_end = node
+                if node != previous_bad + 1:
+                    last_run_start = node
+                previous_bad = node
                 s = s_mm[node]
                 lowest = min(lowest, limit[node])
                 if s < accel_end:
@@ -216,9 +226,16 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
             any_bad = True
             new_start = hold_start[seg]
             new_end = hold_end[seg]
-            if up and v[seg] > 0.0:
+            # confined (CRAWL_REL), a hold longer than max_hold_s is a cap at the lowest limit
+            # it broke (a near cusp's 0.3 mm/s held 5 mm to a dip took 17 s), and beside a rest
+            # the shoulder ends the run there: the cap is that run's lowest limit, and a far
+            # run (a dip the S-curve from rest passes too fast) took it along (0.2 mm/s, 9 mm)
+            long_up = up and v[seg] > 0.0 and first_up - key_s[seg] > v[seg] * max_hold_s
+            long_down = (down and v[seg + 1] > 0.0
+                         and key_s[seg + 1] - last_down > v[seg + 1] * max_hold_s)
+            if up and v[seg] > 0.0 and not (confine and long_up):
                 new_start = max(new_start, first_up - key_s[seg])
-            if down and v[seg + 1] > 0.0:
+            if down and v[seg + 1] > 0.0 and not (confine and long_down):
                 new_end = max(new_end, key_s[seg + 1] - last_down)
             # Under the path model the cap falls to the lowest limit of the nodes a hold cannot
             # help (those of the cruise, and beside a key at rest), not to that of nodes a hold
@@ -228,17 +245,19 @@ def _limit_rounds(s_mm, limit, key_node, nominal, cap, hold_start, hold_end, acc
             # the nodes afterwards (the path model's is, by path_excess), and cruising at the
             # exact limit of a node let a curvature bump between two nodes, 0.5 % above both,
             # pass 0.09 % above the normal-jerk limit.
-            lower_cap = mid or (up and v[seg] == 0.0) or (down and v[seg + 1] == 0.0)
+            capped_up = up and (v[seg] == 0.0 or (confine and long_up))
+            capped_down = down and (v[seg + 1] == 0.0 or (confine and long_down))
+            lower_cap = mid or capped_up or capped_down
             cap_to = lowest_mid if cap_to_cruise else lowest
-            if up and v[seg] == 0.0:
+            if capped_up:
                 cap_to = min(cap_to, lowest_up)
-            if down and v[seg + 1] == 0.0:
+            if capped_down:
                 cap_to = min(cap_to, lowest_down)
-            if up and (v[seg] == 0.0 or first_up - key_s[seg] > v[seg] * max_hold_s):
-                shoulder_at[seg] = last_up_node
-            elif down and (v[seg + 1] == 0.0
-                           or key_s[seg + 1] - last_down > v[seg + 1] * max_hold_s):
-                shoulder_at[seg] = first_down_node
+            if up and (v[seg] == 0.0 or long_up):
+                shoulder_at[seg] = first_run_end if confine and v[seg] == 0.0 else last_up_node
+            elif down and (v[seg + 1] == 0.0 or long_down):
+                shoulder_at[seg] = (last_run_start if confine and v[seg + 1] == 0.0
+                                    else first_down_node)
             # A hold shortens what is left for the transitions; the next scan lowers the key
             # speeds until they fit. Holds that would meet leave no room: lower the cap instead.
             if new_start + new_end < length[seg] * (1.0 - HOLD_ROOM):
@@ -316,7 +335,8 @@ class _OnGrid(NamedTuple):
 
 
 def _plan_on_grid(grid: Grid, raw_limit, fcap, feed_nodes, kappa0: float, lim: Limits,
-                  acc: float, jerk: float, fixed_keys: np.ndarray) -> _OnGrid:
+                  acc: float, jerk: float, fixed_keys: np.ndarray, *, confine: bool = False
+                  ) -> _OnGrid:
     """Steps 2-5 on one grid, with shoulder key points added where holds cannot help.
 
     Beside a rest where the limit rises steeply (a curve that starts with a hook, a weight near
@@ -336,7 +356,8 @@ def _plan_on_grid(grid: Grid, raw_limit, fcap, feed_nodes, kappa0: float, lim: L
         # compiled for writable arrays, and a read-only one would compile it a second time
         v, peak, *pieces, key_t, duration, v_nodes, rounds, shoulder_at, hidden_peak_s = \
             _limit_rounds(grid.s_mm.copy(), limit, key_node, nominal, cap, hold_start, hold_end,
-                          acc, jerk, HOLD_MAX_PERIODS * lim.period_s, lim.jerk_model == "path")
+                          acc, jerk, HOLD_MAX_PERIODS * lim.period_s, lim.jerk_model == "path",
+                          confine)
         if not (shoulder_at >= 0).any():  # (the common case: setdiff1d costs ~50 us)
             break
         new = np.setdiff1d(shoulder_at[shoulder_at >= 0], key_node)
@@ -363,6 +384,17 @@ def _hidden_slowdown(curve: NurbsCurve, grid: Grid, lim: Limits, feed_u, feed_mm
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.where(here > 0.0, peak[hidden] / here, 1.0)
     return max(1.0, float(ratio.max()))
+
+
+# a path-model plan over this many times its lower bound (path_check.least_cycle_s) may crawl
+# where holds and shoulders met a near cusp: planned again confined, the shorter plan is kept
+CRAWL_REL = 4.0
+
+
+def _uncrawled(on: _OnGrid, least: float, *args) -> _OnGrid:
+    """`on`, or the confined plan of `_plan_on_grid(*args)` where on crawls and it is shorter."""
+    confined = _plan_on_grid(*args, confine=True) if on.duration > CRAWL_REL * least else on
+    return confined if confined.duration < on.duration else on
 
 
 PATH_FIX_ROUNDS = 3  # plans again with the limit lowered where the law broke a path limit ...
@@ -410,14 +442,17 @@ def scurve_plan(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s: n
         if more.size == 0:
             break
         extra_u = np.union1d(extra_u, more)
-    law = on.law()
     excess = 1.0
-    hidden_slowdown = _hidden_slowdown(curve, grid, lim, feed_u, feed_mm_s, on.peak,
-                                       on.hidden_peak_s)
     if path:
         least = least_cycle_s(curve, grid, lim, fcap)
         if not least <= max_curve_time_s:
             raise CurveError(too_long(least, max_curve_time_s, least=True))
+        on = _uncrawled(on, least, grid, raw_limit, fcap, feed_nodes, kappa0, lim, acc, jerk,
+                        fixed_keys)
+    law = on.law()
+    hidden_slowdown = _hidden_slowdown(curve, grid, lim, feed_u, feed_mm_s, on.peak,
+                                       on.hidden_peak_s)
+    if path:
         # where the S-curves' own acceleration and jerk break a path limit, lower the limit
         # there and plan again (PATH_FIX_ROUNDS at most, keeping the plan whose cycle after the
         # uniform slowdown that is left is the shortest): one needle of a 0.14 um hook beside
@@ -429,8 +464,8 @@ def scurve_plan(curve: NurbsCurve, lim: Limits, feed_u: np.ndarray, feed_mm_s: n
             if excess <= 1.0 + PATH_FIX_REL:
                 break
             raw_limit, fixed_keys = path_limit(curve, grid, lim, paper_limit, path_caps)
-            on = _plan_on_grid(grid, raw_limit, fcap, feed_nodes, kappa0, lim, acc, jerk,
-                               fixed_keys)
+            args = (grid, raw_limit, fcap, feed_nodes, kappa0, lim, acc, jerk, fixed_keys)
+            on = _uncrawled(_plan_on_grid(*args), least, *args)
             law = on.law()
             excess, caps = path_excess(curve, grid, law, lim)
             hidden_slowdown = _hidden_slowdown(curve, grid, lim, feed_u, feed_mm_s, on.peak,
