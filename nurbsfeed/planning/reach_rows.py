@@ -31,7 +31,12 @@ from nurbsfeed.planning.basis import G_CAP, G_D, G_K, G_KAPPA, G_KS, G_T
 
 NORMAL_SIDES = 16  # the polygon inscribed in the circle |jerk across T| <= J_n (3-D)
 PLANAR_REL = 1e-9  # K_s's part along B below this share of |K_s|: none
-ZERO_REL = 1e-12  # an axis whose share of T, K and K_s is below this has no rows
+# an axis whose share of T, K and K_s is below this has no rows; K's and K_s's shares are of
+# their size but at least 1 /mm (1 /mm^2): on a straight piece K_s is rounding (1e-16 /mm^2),
+# and an axis across it whose T is rounding too (1e-16) made a jerk row with a u coefficient
+# of 1e-16, which bounds a1 by terms of 1e17 whose rounding alone is 100 mm/s^2 (a line after
+# a bend found no motion). What such an axis adds is below 1e-12 (u + 3 a + b): nothing.
+ZERO_REL = 1e-12
 B_FLOOR = 1e-12  # the least linearisation point
 # per point at most: cap, b >= 0, 2 tangential accelerations, 6 axis accelerations, the normal
 # jerk's half polygon, 2 tangential and 6 axis jerks; per cell three points, the middle control
@@ -76,7 +81,7 @@ def point_rows(g, b0, lim, with_jerk, xb, xu, ya, rows, r):
     r = _put(rows, r, -1.0, 0.0, 0.0, 0.0, xb, xu, ya)
     r = _put(rows, r, 0.0, 1.0, 0.0, acc_t, xb, xu, ya)
     r = _put(rows, r, 0.0, -1.0, 0.0, acc_t, xb, xu, ya)
-    k_size = abs(k)
+    k_size = max(abs(k), 1.0)
     ks_size = math.sqrt(g[G_KS] ** 2 + g[G_KS + 1] ** 2 + g[G_KS + 2] ** 2)
     for x in range(3):
         acc_x = lim[4 + x]
@@ -127,7 +132,7 @@ def point_rows(g, b0, lim, with_jerk, xb, xu, ya, rows, r):
         jerk_x = lim[7 + x]
         tx, kx, ksx_ = g[G_T + x], g[G_K + x], g[G_KS + x]
         if jerk_x == np.inf or (abs(tx) <= ZERO_REL and abs(kx) <= ZERO_REL * k_size
-                                and abs(ksx_) <= ZERO_REL * ks_size):
+                                and abs(ksx_) <= ZERO_REL * max(ks_size, 1.0)):
             continue
         slope, bound = jerk_tangent(jerk_x, abs(g[G_D + x]) / period, b0)
         r = _put(rows, r, ksx_ + slope, 3.0 * kx, tx, bound, xb, xu, ya)
