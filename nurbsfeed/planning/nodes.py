@@ -44,6 +44,17 @@ MERGE_KAPPA_RATIO = 1.25
 # those corners (the short legs of a 3 mm star, 1.1 % slower with two-period cells)
 MERGE_SPEED_RATIO = 1.1
 BRAKE_CELL_PERIODS = 1.0
+# Where the motion cruises at the programmed feed nothing changes from one node to the next
+# (b stays at the feed's, which a quadratic holds exactly): nodes merge up to this many periods
+# apart there, and only cells longer than CRUISE_CUT_PERIODS are cut. The speed estimate knows
+# no jerk, so a node cruises only where the estimate and the pointwise limit (a = j = 0) are at
+# the feed within CRUISE_MARGIN times the distance the feed covers in A / J (what jerk adds to
+# a braking) either side: 1 was too close (a LinuxCNC sample 0.6 % slower under
+# paper-table1's limits); at 2, the benchmark's curves plan on 13 % fewer cells and every
+# sample and dense curve in the same cycle (within 0.05 %)
+CRUISE_CELL_PERIODS = 4.0
+CRUISE_MARGIN = 2.0
+CRUISE_CUT_PERIODS = 8.0
 MIN_CELL_REL = 1e-6  # of the curve's length: nodes closer than this are one
 MIN_STRETCH_CELLS = 4  # a stretch between rests has at least this many cells
 REST_CELL_SHARE = 0.05  # of A^3 / (6 J^2): the first cell beside a rest at most ...
@@ -72,10 +83,26 @@ def _topp_passes(b, h, slope):
         b[i] = min(b[i], b[i + 1] + slope * h[i])
 
 
+def _cruising(s_mm: np.ndarray, sizing: np.ndarray, cruise_mm_s: np.ndarray,
+              rest: np.ndarray, margin_s: float) -> np.ndarray:
+    """Which nodes (N,) cruise (CRUISE_CELL_PERIODS): the speed cells are sized at (N,) is
+    the cruise speed (N,; NaN: none) there and at every node within margin_s mm, and no rest
+    is."""
+    at_feed = (sizing >= cruise_mm_s * (1.0 - 1e-9)) & ~rest
+    off = s_mm[~at_feed]
+    if off.size == 0:
+        return at_feed
+    after = np.minimum(np.searchsorted(off, s_mm), off.size - 1)
+    before = np.maximum(after - 1, 0)
+    near = np.minimum(np.abs(s_mm - off[before]), np.abs(off[after] - s_mm))
+    return at_feed & (near > margin_s)
+
+
 @jit
-def _merge(s_mm, period_mm, kappa, essential, rest, floor, keep):
+def _merge(s_mm, period_mm, kappa, essential, rest, floor, keep, cruise):
     """Which grid nodes stay (keep (N,), all True on entry): the rules of MIN_CELL_PERIODS and
-    the two after it; period_mm (N,): the length of a period at the speed cells are sized at."""
+    the two after it, and CRUISE_CELL_PERIODS between two nodes that cruise (N,); period_mm
+    (N,): the length of a period at the speed cells are sized at."""
     kept = 0
     lo_k = hi_k = kappa[0]
     lo_v = hi_v = period_mm[0]
@@ -84,7 +111,8 @@ def _merge(s_mm, period_mm, kappa, essential, rest, floor, keep):
         lo_k, hi_k = min(lo_k, kappa[k]), max(hi_k, kappa[k])
         lo_v, hi_v = min(lo_v, period_mm[k]), max(hi_v, period_mm[k])
         periods = gap / max(min(period_mm[k], period_mm[kept]), 1e-300)
-        if gap >= floor and (essential[k] or periods >= MIN_CELL_PERIODS
+        least = CRUISE_CELL_PERIODS if cruise[k] and cruise[kept] else MIN_CELL_PERIODS
+        if gap >= floor and (essential[k] or periods >= least
                              or hi_k > MERGE_KAPPA_RATIO * lo_k
                              or (periods >= BRAKE_CELL_PERIODS
                                  and hi_v > MERGE_SPEED_RATIO * lo_v)):
@@ -103,7 +131,8 @@ def _merge(s_mm, period_mm, kappa, essential, rest, floor, keep):
 def schedule_nodes(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.ndarray,
                    cap_mm_s: np.ndarray, kappa_floor: float,
                    keep_u: np.ndarray = np.empty(0), max_nodes: int = 2**62,
-                   ends: ChainEnds = AT_REST, seed_s: np.ndarray = np.empty(0)
+                   ends: ChainEnds = AT_REST, seed_s: np.ndarray = np.empty(0),
+                   cruise_mm_s: np.ndarray | None = None
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """The nodes (s_mm, u, rest) (M,) of the schedule from the grid's, resting at grid nodes
     rest_nodes (R,) (the ends first and last); cap_mm_s (N,): the speed caps at the grid's
@@ -112,13 +141,15 @@ def schedule_nodes(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.nd
     ends: a moving end has no rest cell, so none of the nodes beside a rest, but one close
     enough that the state's slope cannot take b to 0 within the first cell (`_open_end_nodes`);
     seed_s: nodes (ascending) that replace every node between the first and the last of them
-    (the nodes of the plan a moving end's state comes from, where the two overlap).
+    (the nodes of the plan a moving end's state comes from, where the two overlap);
+    cruise_mm_s (N,): the speed the motion may cruise at at the grid's nodes (NaN: none; None:
+    no cruise anywhere), CRUISE_CELL_PERIODS.
     Also the speed estimate (M,) at the nodes (`speed_estimate`). None past max_nodes nodes."""
     s_mm, u = np.asarray(grid.s_mm, dtype=float), np.asarray(grid.u, dtype=float)
     rest = np.zeros(s_mm.size, dtype=bool)
     rest[rest_nodes] = True
-    v_limit = speed_estimate(s_mm, np.asarray(cap_mm_s, dtype=float),
-                             _moving_limits(curve, lim)[0], rest, ends)
+    acc, jerk = _moving_limits(curve, lim)
+    v_limit = speed_estimate(s_mm, np.asarray(cap_mm_s, dtype=float), acc, rest, ends)
     v_limit = np.maximum(v_limit, np.where(rest, 0.0, 1e-300))
     essential = rest.copy()
     essential[grid.peak_index] = True
@@ -132,14 +163,18 @@ def schedule_nodes(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.nd
     # speed): the estimate knows no jerk, and at a slow tip its periods would be several of
     # the motion's
     kappa_1 = np.minimum(np.nan_to_num(grid.kappa_1_mm, posinf=1e150), 1e150)
-    turn = (_moving_limits(curve, lim)[1] / np.maximum(kappa_1, 1e-150) ** 2) ** (1.0 / 3.0)
-    _merge(s_mm, np.minimum(np.asarray(v_limit, dtype=float), turn) * lim.period_s, kappa,
-           essential, rest, floor, keep)
+    turn = (jerk / np.maximum(kappa_1, 1e-150) ** 2) ** (1.0 / 3.0)
+    sizing = np.minimum(np.asarray(v_limit, dtype=float), turn)
+    cruise = np.zeros(s_mm.size, dtype=bool)
+    if cruise_mm_s is not None and np.isfinite(cruise_mm_s).any():
+        feed = float(np.nanmax(cruise_mm_s))
+        cruise = _cruising(s_mm, sizing, cruise_mm_s, rest, CRUISE_MARGIN * feed * acc / jerk)
+    _merge(s_mm, sizing * lim.period_s, kappa, essential, rest, floor, keep, cruise)
+    grid_s, grid_cruise = s_mm, cruise.astype(float)
     s_mm, u, rest, v = s_mm[keep], u[keep], rest[keep], np.asarray(v_limit, dtype=float)[keep]
     rests = np.flatnonzero(rest)
     extra = [np.linspace(s_mm[a], s_mm[b], MIN_STRETCH_CELLS + 1)[1:-1]
              for a, b in zip(rests[:-1], rests[1:]) if b - a < MIN_STRETCH_CELLS]
-    acc, jerk = _moving_limits(curve, lim)
     first_h = REST_CELL_SHARE * acc**3 / (6.0 * jerk**2)
     doubling = 2.0 ** np.arange(64)
     last_stretch = rests.size - 2
@@ -160,10 +195,13 @@ def schedule_nodes(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.nd
             near = near[(near < min(half / 2, step)) & (near >= floor)]
             extra.append(s_mm[at] + side * near)
     s_mm, u, rest, v = _insert(curve, grid, s_mm, u, rest, v, extra)
-    # cells in which even the limit spends more than CELL_PERIODS periods are cut
+    # cells in which even the limit spends more than CELL_PERIODS periods are cut (a cruise's,
+    # CRUISE_CUT_PERIODS: between two nodes that cruise, all do)
     h = np.diff(s_mm)
     speed = np.maximum(np.minimum(v[:-1], v[1:]), 1e-300)
-    parts = np.ceil(h / (CELL_PERIODS * lim.period_s * speed))
+    cruising = np.interp(s_mm, grid_s, grid_cruise) >= 1.0
+    periods = np.where(cruising[:-1] & cruising[1:], CRUISE_CUT_PERIODS, CELL_PERIODS)
+    parts = np.ceil(h / (periods * lim.period_s * speed))
     closed = rest.copy()  # the rests with a rest cell beside them
     closed[[0, -1]] &= ~np.array(ends.moving)
     long = (parts > 1.0) & ~closed[:-1] & ~closed[1:]
@@ -177,7 +215,7 @@ def schedule_nodes(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.nd
         s_mm, u, rest, v = _seeded(curve, grid, s_mm, u, rest, v, seed_s, floor)
     # the estimate again on the nodes (inserted ones took theirs by interpolation)
     cap = np.interp(s_mm, grid.s_mm, np.asarray(cap_mm_s, dtype=float))
-    return s_mm, u, rest, speed_estimate(s_mm, cap, _moving_limits(curve, lim)[0], rest, ends)
+    return s_mm, u, rest, speed_estimate(s_mm, cap, acc, rest, ends)
 
 
 def _seeded(curve: NurbsCurve, grid: Grid, s_mm: np.ndarray, u: np.ndarray, rest: np.ndarray,

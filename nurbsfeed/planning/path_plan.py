@@ -95,6 +95,14 @@ def rest_nodes(grid: Grid, limit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return nodes, kind[nodes]
 
 
+def _cruise_speed(grid: Grid, lim: Limits, limit: np.ndarray,
+                  feed_at_u: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """The speed the motion may cruise at at each grid node (M,): the programmed feed where the
+    pointwise limit allows it, NaN elsewhere (nodes.schedule_nodes)."""
+    feed = np.minimum(feed_at_u(grid.u), lim.feed_mm_s)
+    return np.where(limit >= feed * (1.0 - 1e-9), feed, np.nan)
+
+
 def plan_path(curve: NurbsCurve, grid: Grid, lim: Limits, limit: np.ndarray, cap: np.ndarray,
               feed_at_u: Callable[[np.ndarray], np.ndarray], feed_breaks: np.ndarray,
               extra_slowdown: float = 1.0, ends: ChainEnds = AT_REST,
@@ -127,7 +135,8 @@ def plan_path(curve: NurbsCurve, grid: Grid, lim: Limits, limit: np.ndarray, cap
     if np.any(moving & must_rest):
         return None
     nodes = schedule_nodes(curve, grid, lim, rests, cap, curvature_threshold(lim), feed_breaks,
-                           MAX_CELLS, ends, np.empty(0) if seed is None else seed[0])
+                           MAX_CELLS, ends, np.empty(0) if seed is None else seed[0],
+                           _cruise_speed(grid, lim, limit, feed_at_u))
     # a stretch needs two knots of its own between its rest cells: one too short to hold them
     # (a few millionths of the curve between two rests) is the S-curve plan's
     if (nodes is None or int(nodes[2].sum()) != rests.size
