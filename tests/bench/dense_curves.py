@@ -3,7 +3,8 @@
 Each curve is a closed-form path sampled densely, the samples taken as the control points of a
 clamped cubic B-spline with knots averaged from the chord lengths (de Boor, as
 tests/bench/programs.py does), which follows the path to within the polygon's own sagging; or one
-of the benchmark's seeded CAM-like curves. All are deterministic.
+of the benchmark's seeded CAM-like curves; or a toolpath's shapes as a CAM system writes them
+(straight legs along the axes, exact arcs). All are deterministic.
 """
 
 from __future__ import annotations
@@ -47,6 +48,32 @@ def _helix(radius_mm: float, pitch_mm: float, turns: float, samples: int) -> np.
                             pitch_mm * t / (2 * np.pi)])
 
 
+def _axis_bend() -> NurbsCurve:
+    """40 mm along X, a bend of about 1 mm radius, 40 mm along Y: a toolpath's corner as the
+    CAM rounds it, in one cubic (the legs are exactly straight, along the axes)."""
+    return NurbsCurve.build(3, [0, 0, 0, 0, 0.45, 0.5, 0.55, 1, 1, 1, 1],
+                            [[0, 0, 0], [20, 0, 0], [40, 0, 0], [41, 0, 0], [41, 1, 0],
+                             [41, 21, 0], [41, 41, 0]], None, "axis-bend")
+
+
+def _pocket(width_mm: float, height_mm: float, radius_mm: float) -> NurbsCurve:
+    """A pocket's outline, width x height with corners of radius_mm, once round as one
+    quadratic NURBS: straight spans along the axes and exact quarter circles (weight 1/sqrt 2),
+    double knots between them (the curvature jumps there)."""
+    w, h, r = width_mm, height_mm, radius_mm
+    arc = np.sqrt(0.5)
+    spans = [((w / 2, -r), 1.0), ((w, -r), 1.0), ((w + r, -r), arc), ((w + r, 0.0), 1.0),
+             ((w + r, h / 2), 1.0), ((w + r, h), 1.0), ((w + r, h + r), arc), ((w, h + r), 1.0),
+             ((w / 2, h + r), 1.0), ((0.0, h + r), 1.0), ((-r, h + r), arc), ((-r, h), 1.0),
+             ((-r, h / 2), 1.0), ((-r, 0.0), 1.0), ((-r, -r), arc), ((0.0, -r), 1.0)]
+    points = np.array([(0.0, -r)] + [xy for xy, _ in spans])
+    weights = np.array([1.0] + [wt for _, wt in spans])
+    pieces = len(spans) // 2
+    inner = np.repeat(np.arange(1, pieces), 2)
+    knots = np.concatenate([[0, 0, 0], inner, [pieces] * 3]) / pieces
+    return NurbsCurve.build(2, knots, points, weights, "pocket")
+
+
 def _long_cam_curve(n_ctrl: int) -> NurbsCurve:
     spec = random_curves(1, seed=7, n_ctrl=n_ctrl)[0]
     return NurbsCurve.build(3, spec["knots"], spec["control_points"], spec["weights"],
@@ -68,6 +95,11 @@ def dense_curves(quick: bool = False) -> list[NurbsCurve]:
         _fitted("tiny-star", _star(1.5, 0.95, 301)),
         # a 3-turn helical ramp, radius 10 mm, pitch 2 mm: the torsion term and Z
         _fitted("helix", _helix(10.0, 2.0, 3.0, 181)),
+        # a toolpath's corner: straight legs along X and Y, a 1 mm bend between
+        _axis_bend(),
+        # a 30 x 20 mm pocket's outline with 2 mm corners: lines and exact arcs, knots where the
+        # curvature jumps
+        _pocket(30.0, 20.0, 2.0),
     ]
     if not quick:
         curves += [
