@@ -26,6 +26,7 @@ from nurbsfeed.planning import path_plan
 from nurbsfeed.planning import reach_schedule as rs
 from nurbsfeed.planning.basis import G_CAP, G_KS, G_SIZE, G_T
 from nurbsfeed.planning.cells import Layout
+from nurbsfeed.planning.plan import KIND_CUSP
 from nurbsfeed.planning.planner import plan_curve
 from nurbsfeed.planning.reach_bounds import LOOSE_END_REL, MOVING_END_REL, fold_end, prune
 from nurbsfeed.planning.reach_pass import (
@@ -39,6 +40,7 @@ from nurbsfeed.planning.reach_pass import (
 )
 from nurbsfeed.planning.reach_rows import B_FLOOR, ROWS_PER_CELL, cell_rows, jerk_tangent
 from nurbsfeed.planning.reach_sets import level_interval
+from tests.bench.dense_curves import axis_toolpaths
 
 DEFAULT = load_machine("default")
 # a cubic out of the plane (the normal jerk's polygon rows), 30 mm: 114 cells under the default
@@ -615,3 +617,38 @@ def test_a_line_along_an_axis_after_a_bend_is_planned_near_the_reference() -> No
     assert plan.planner == "optimal" and plan.schedule is not None
     reference = jerk_limited_schedule(BEND, lim, np.empty(0), np.empty(0))
     assert plan.cycle_time_s <= 1.01 * reference.cycle_s, (plan.cycle_time_s, reference.cycle_s)
+
+
+def test_toolpaths_along_the_axes_are_planned_by_the_path_planner() -> None:
+    """72 toolpaths as CAM writes them (legs along the axes, corners and cusps; the other axes'
+    parts of T rounding, 1e-15): every one planned by the path planner under the default
+    profile. Before the rounding counted as 0 in the axes' rows, 4 of these (9 of the first
+    150) found no motion in the sets of a straight leg and took the S-curve plan."""
+    planners = {curve.name: plan_curve(curve, dataclasses.replace(
+        DEFAULT.limits, feed_mm_s=min(feed, DEFAULT.limits.feed_mm_s))).planner
+        for curve, feed in axis_toolpaths(72)}
+    assert set(planners.values()) == {"optimal"}, {k: v for k, v in planners.items()
+                                                   if v != "optimal"}
+
+
+def test_two_cusps_5_um_apart_leave_a_stretch_the_nodes_can_cut() -> None:
+    """A quadratic that runs back on itself twice within 5 um (an axis toolpath whose leg turns
+    back): the stretch between the two cusps has no grid node, so its inserted nodes took a
+    speed estimate of 0 and were cut past any count (no nodes: the S-curve plan under
+    paper-table1's limits, 2.883 s). They take the speed constant jerk reaches from the nearer
+    rest; the path planner plans the curve."""
+    corners = np.array([[0.0, 0.0, 0.0], [-0.8004416712036622, 0.0, 0.0],
+                        [19.800541455598662, 0.0, 0.0],
+                        [19.800541455598662, 14.122384980634308, 0.0],
+                        [19.800541455598662, -11.446062832005119, 0.0],
+                        [-6.9706723319728106, -11.446062832005119, 0.0],
+                        [-2.879696649237042, -11.446062832005119, 0.0]])
+    points = [corners[0]]
+    for a, b in zip(corners[:-1], corners[1:]):
+        points += [a + t * (b - a) for t in (1 / 3, 2 / 3)] + [b]
+    knots = np.concatenate([np.zeros(3), np.linspace(0.0, 1.0, 18)[1:-1], np.ones(3)])
+    curve = NurbsCurve.build(2, knots, np.array(points), None, "two-cusps")
+    lim = load_machine("paper-table1", {"jerk_model": "path", "planner": "optimal"}).limits
+    plan = plan_curve(curve, dataclasses.replace(lim, feed_mm_s=60.0))
+    assert plan.planner == "optimal"
+    assert np.count_nonzero(plan.key_kind == KIND_CUSP) >= 2  # both cusps rest

@@ -195,6 +195,16 @@ def schedule_nodes(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.nd
             near = near[(near < min(half / 2, step)) & (near >= floor)]
             extra.append(s_mm[at] + side * near)
     s_mm, u, rest, v = _insert(curve, grid, s_mm, u, rest, v, extra)
+    # a node inserted between two rests with no grid node between them took 0 by interpolation,
+    # and its cells would be cut past any count (two cusps 5 um apart, a stretch of its own):
+    # there the speed constant jerk reaches from the nearer rest, 0.5 (6 d)^(2/3) J^(1/3), which
+    # no motion between the two rests passes
+    still = ~rest & ~(v > 0.0)
+    if still.any():
+        rest_s = s_mm[rest]
+        at = np.clip(np.searchsorted(rest_s, s_mm), 1, rest_s.size - 1)
+        d = np.minimum(np.abs(s_mm - rest_s[at - 1]), np.abs(rest_s[at] - s_mm))
+        v = np.where(still, 0.5 * (6.0 * d) ** (2.0 / 3.0) * jerk ** (1.0 / 3.0), v)
     # cells in which even the limit spends more than CELL_PERIODS periods are cut (a cruise's,
     # CRUISE_CUT_PERIODS: between two nodes that cruise, all do)
     h = np.diff(s_mm)

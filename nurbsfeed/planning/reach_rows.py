@@ -31,12 +31,19 @@ from nurbsfeed.planning.basis import G_CAP, G_D, G_K, G_KAPPA, G_KS, G_T
 
 NORMAL_SIDES = 16  # the polygon inscribed in the circle |jerk across T| <= J_n (3-D)
 PLANAR_REL = 1e-9  # K_s's part along B below this share of |K_s|: none
-# an axis whose share of T, K and K_s is below this has no rows; K's and K_s's shares are of
-# their size but at least 1 /mm (1 /mm^2): on a straight piece K_s is rounding (1e-16 /mm^2),
-# and an axis across it whose T is rounding too (1e-16) made a jerk row with a u coefficient
-# of 1e-16, which bounds a1 by terms of 1e17 whose rounding alone is 100 mm/s^2 (a line after
-# a bend found no motion). What such an axis adds is below 1e-12 (u + 3 a + b): nothing.
+# an axis's share of T, K or K_s below this is rounding and counts as 0 in its rows (K's and
+# K_s's shares are of their size but at least of 1 /mm and 1 /mm^2), and an axis with none
+# left has no rows: on a straight piece along one axis the others' T is rounding (1e-15), and
+# a jerk row with that for its u coefficient bounds a1 by terms of 1e17 whose rounding alone is
+# 100 mm/s^2 (reach_bounds.split_rows divides by it): a line after a bend, and a straight leg
+# after a cusp, found no motion. What such a share adds is below 1e-12 (u + 3 a + b): nothing.
 ZERO_REL = 1e-12
+
+
+@jit
+def _share(value, size):
+    """value, or 0 where it is below ZERO_REL of size."""
+    return value if abs(value) > ZERO_REL * size else 0.0
 B_FLOOR = 1e-12  # the least linearisation point
 # per point at most: cap, b >= 0, 2 tangential accelerations, 6 axis accelerations, the normal
 # jerk's half polygon, 2 tangential and 6 axis jerks; per cell three points, the middle control
@@ -85,8 +92,8 @@ def point_rows(g, b0, lim, with_jerk, xb, xu, ya, rows, r):
     ks_size = math.sqrt(g[G_KS] ** 2 + g[G_KS + 1] ** 2 + g[G_KS + 2] ** 2)
     for x in range(3):
         acc_x = lim[4 + x]
-        tx, kx = g[G_T + x], g[G_K + x]
-        if acc_x == np.inf or (abs(tx) <= ZERO_REL and abs(kx) <= ZERO_REL * k_size):
+        tx, kx = _share(g[G_T + x], 1.0), _share(g[G_K + x], k_size)
+        if acc_x == np.inf or (tx == 0.0 and kx == 0.0):
             continue
         r = _put(rows, r, kx, tx, 0.0, acc_x, xb, xu, ya)
         r = _put(rows, r, -kx, -tx, 0.0, acc_x, xb, xu, ya)
@@ -130,9 +137,9 @@ def point_rows(g, b0, lim, with_jerk, xb, xu, ya, rows, r):
     r = _put(rows, r, k * k + slope, 0.0, -1.0, bound, xb, xu, ya)
     for x in range(3):
         jerk_x = lim[7 + x]
-        tx, kx, ksx_ = g[G_T + x], g[G_K + x], g[G_KS + x]
-        if jerk_x == np.inf or (abs(tx) <= ZERO_REL and abs(kx) <= ZERO_REL * k_size
-                                and abs(ksx_) <= ZERO_REL * max(ks_size, 1.0)):
+        tx, kx = _share(g[G_T + x], 1.0), _share(g[G_K + x], k_size)
+        ksx_ = _share(g[G_KS + x], max(ks_size, 1.0))
+        if jerk_x == np.inf or (tx == 0.0 and kx == 0.0 and ksx_ == 0.0):
             continue
         slope, bound = jerk_tangent(jerk_x, abs(g[G_D + x]) / period, b0)
         r = _put(rows, r, ksx_ + slope, 3.0 * kx, tx, bound, xb, xu, ya)

@@ -74,6 +74,35 @@ def _pocket(width_mm: float, height_mm: float, radius_mm: float) -> NurbsCurve:
     return NurbsCurve.build(2, knots, points, weights, "pocket")
 
 
+def axis_toolpaths(count: int, seed: int = 1) -> list[tuple[NurbsCurve, float]]:
+    """count toolpaths as a CAM system writes them, each with a feed (mm/s): a polyline of 3 to
+    8 legs along the axes (mostly X and Y, a third of them Z too), 0.5 to 30 mm each, turning
+    by 90 degrees or back on themselves (a cusp), each leg cut in three, as one quadratic or
+    cubic NURBS (uniform or random knots, weights of 1 or random in [0.5, 2]). The legs are
+    straight along an axis: the other axes' parts of T are rounding."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(count):
+        corners = [np.zeros(3)]
+        for _ in range(int(rng.integers(3, 9))):
+            axis = rng.integers(0, 3 if rng.random() < 0.3 else 2)
+            step = np.zeros(3)
+            step[axis] = rng.choice([-1, 1]) * rng.uniform(0.5, 30)
+            corners.append(corners[-1] + step)
+        degree = int(rng.choice([2, 3]))
+        points = [corners[0]]
+        for a, b in zip(corners[:-1], corners[1:]):
+            points += [a + (b - a) / 3, a + 2 * (b - a) / 3, b]
+        m = len(points)
+        inner = (np.sort(rng.uniform(0, 1, m - degree - 1)) if rng.random() < 0.5
+                 else np.linspace(0, 1, m - degree + 1)[1:-1])
+        knots = np.concatenate([np.zeros(degree + 1), inner, np.ones(degree + 1)])
+        weights = None if rng.random() < 0.7 else rng.uniform(0.5, 2.0, m)
+        feed = float(rng.choice([20.0, 60.0, 100.0, 200.0]))
+        out.append((NurbsCurve.build(degree, knots, np.array(points), weights, f"axis-{i}"), feed))
+    return out
+
+
 def _long_cam_curve(n_ctrl: int) -> NurbsCurve:
     spec = random_curves(1, seed=7, n_ctrl=n_ctrl)[0]
     return NurbsCurve.build(3, spec["knots"], spec["control_points"], spec["weights"],
