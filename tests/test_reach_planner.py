@@ -652,3 +652,16 @@ def test_two_cusps_5_um_apart_leave_a_stretch_the_nodes_can_cut() -> None:
     plan = plan_curve(curve, dataclasses.replace(lim, feed_mm_s=60.0))
     assert plan.planner == "optimal"
     assert np.count_nonzero(plan.key_kind == KIND_CUSP) >= 2  # both cusps rest
+
+
+def test_a_set_narrower_than_the_fine_probes_is_found() -> None:
+    """A toolpath whose straight leg meets a 0.1 um turn at a knot (kappa 9,400 /mm; the motion
+    passes at 0.03 mm/s on cells of half a micrometre): the set of the knot before the turn
+    spans less in a than the fine probes' spacing, and none of them met it; probed at a = 0
+    and at the next knot's levels, it is found, and the path planner plans the curve (it took
+    the S-curve plan, 3.669 s; 3.515 s now) under paper-table1's limits."""
+    curve, feed = axis_toolpaths(76)[75]
+    lim = load_machine("paper-table1", {"jerk_model": "path", "planner": "optimal"}).limits
+    plan = plan_curve(curve, dataclasses.replace(lim, feed_mm_s=min(feed, lim.feed_mm_s)))
+    assert plan.planner == "optimal"
+    assert plan.cycle_time_s < 3.6

@@ -377,7 +377,15 @@ def _spread(cell, h, chain, nc, peak, valley, probes, acc, lev_a, lev_hi, lev_lo
         first, last = _probe(cell, h, chain, nc, peak, valley, points, count, scale, probe_hi,
                              probe_lo, level, idx)
         if first < 0:
-            return 0
+            # a set narrower than the fine probes' spacing (a cell of half a micrometre at a
+            # hundredth of a mm/s beside a 0.1 um turn): probed at a = 0 and at the next
+            # knot's levels, where the motion may go on
+            count = _near_next(chain, nc, grid)
+            points = grid[:count]
+            first, last = _probe(cell, h, chain, nc, peak, valley, points, count, scale,
+                                 probe_hi, probe_lo, level, idx)
+            if first < 0:
+                return 0
     ends_a = (chain[0, 0], chain[0, nc - 1]) if nc > 0 else (np.nan, np.nan)
     a0, hi0, lo0 = points[first], probe_hi[first], probe_lo[first]
     if first > 0:
@@ -412,6 +420,28 @@ def _spread(cell, h, chain, nc, peak, valley, probes, acc, lev_a, lev_hi, lev_lo
             m += 1
     _store(lev_a, lev_hi, lev_lo, m, a1, hi1, lo1)
     return m + 1
+
+
+@jit
+def _near_next(chain, nc, out):
+    """The next knot's levels' accelerations (chain[0], nc of them, ascending) and 0, ascending
+    and distinct, into out; returns the count."""
+    n = 0
+    zero_in = False
+    for k in range(nc):
+        x = chain[0, k]
+        if not zero_in and x >= 0.0:
+            zero_in = True
+            if x > 0.0:
+                out[n] = 0.0
+                n += 1
+        if n == 0 or x > out[n - 1]:
+            out[n] = x
+            n += 1
+    if not zero_in:
+        out[n] = 0.0
+        n += 1
+    return n
 
 
 @jit
