@@ -56,6 +56,7 @@ def _limits_that_only_catch_a_hang(monkeypatch: pytest.MonkeyPatch) -> None:
     machine; inside the suite, on a loaded one, they would be timed assertions: here they only
     catch a hang."""
     monkeypatch.setattr(oracle, "TIME_LIMIT_S", 600.0)
+    monkeypatch.setattr(oracle, "CEILING_S", 600.0)
     monkeypatch.setattr(oracle, "CHECK_TIME_LIMIT_S", 600.0)
 
 def converted(tmp_path: Path) -> bytes:
@@ -109,6 +110,22 @@ def test_the_oracle_reports_a_timeout(tmp_path: Path) -> None:
     assert code is None, err
     assert crash.startswith("timeout") and crash.endswith("of CPU")
     assert list(tmp_path.iterdir()) == []  # the conversion stopped, its output never written
+
+
+def test_a_cases_cpu_budget_grows_with_the_lines_it_writes(tmp_path: Path,
+                                                             monkeypatch: pytest.MonkeyPatch
+                                                             ) -> None:
+    """A case is slow when its CPU time passes TIME_LIMIT_S plus LINE_CPU_S a line written:
+    the butterfly's conversion (3,7xx lines) is slow against a nanosecond a line, and not
+    against a second a line."""
+    data = (SAMPLES / "butterfly.json").read_bytes()
+    monkeypatch.setattr(oracle, "TIME_LIMIT_S", 0.0)
+    monkeypatch.setattr(oracle, "LINE_CPU_S", 1e-9)
+    slow = check_case(tmp_path, "butterfly.json", data)
+    assert slow.problem is not None and slow.problem.startswith("timeout: ")
+    assert re.search(r"for 37\d\d lines written, more than 0\.0 s$", slow.problem), slow.problem
+    monkeypatch.setattr(oracle, "LINE_CPU_S", 1.0)
+    assert check_case(tmp_path, "butterfly.json", data).problem is None
 
 
 def test_the_oracle_reads_a_lone_cr_inside_a_block_line_as_the_tokenizer_does(

@@ -24,13 +24,21 @@ from __future__ import annotations
 import io
 import re
 import signal
+import time
 from contextlib import redirect_stderr
 from dataclasses import dataclass
 from pathlib import Path
 
 from nurbsfeed.cli import main
 
-TIME_LIMIT_S = 10.0  # CPU seconds of a case (`run_cli`)
+# CPU seconds a case may take (`check_case`): TIME_LIMIT_S, and LINE_CPU_S more for each line
+# it writes. The default's planner converts at 20-90 us a point (docs/benchmarks.md), so a valid
+# program of 392,606 points (a curve of 196 s at 5 mm/s, twice) took 11.6 s: a flat limit
+# calls a long output slow, while a case slow for its size (a planner gone superlinear) still
+# shows. A conversion stops at CEILING_S whatever it writes (`run_cli`'s limit).
+TIME_LIMIT_S = 10.0
+LINE_CPU_S = 100e-6
+CEILING_S = 120.0
 CHECK_TIME_LIMIT_S = 60.0  # `check` of a slow inch curve (70,000 moves) takes seconds
 # nurbsfeed's comment lines, in parentheses or, in a Sinumerik program, after ';'
 CURVE_COMMENT = (b"(nurbsfeed: curve ", b"; nurbsfeed: curve ",
@@ -78,6 +86,7 @@ class Outcome:
 
 _armed = False  # a case is running: the alarm may stop it
 _fired = False  # ... and it did
+last_cpu_s = 0.0  # the CPU time of the last `run_cli`
 
 
 def _alarm(signum: int, frame: object) -> None:
@@ -92,9 +101,10 @@ def run_cli(args: list[str], time_limit_s: float | None = None) -> tuple[int | N
     time_limit_s = TIME_LIMIT_S if time_limit_s is None else time_limit_s
     import traceback
 
-    global _armed, _fired
+    global _armed, _fired, last_cpu_s
     stderr = io.StringIO()
     _fired = False
+    started = time.process_time()
     previous = signal.signal(signal.SIGPROF, _alarm)
     code: int | None
     crash = ""
@@ -118,11 +128,17 @@ def run_cli(args: list[str], time_limit_s: float | None = None) -> tuple[int | N
         _armed = False
         signal.setitimer(signal.ITIMER_PROF, 0)
         signal.signal(signal.SIGPROF, previous)
+        last_cpu_s = time.process_time() - started
     if _fired:
         # raised inside compiled code, the time-out can reach the CLI wrapped (numba's
         # dispatcher returns it as a SystemError, which the CLI reports as an internal error)
         code, crash = None, f"timeout: more than {time_limit_s:g} s of CPU"
     return code, stderr.getvalue(), crash
+
+
+def case_budget_s(lines: int) -> float:
+    """The CPU seconds a case that writes `lines` lines may take (TIME_LIMIT_S, LINE_CPU_S)."""
+    return TIME_LIMIT_S + LINE_CPU_S * lines
 
 
 def split_lines(data: bytes) -> list[bytes]:
@@ -276,9 +292,13 @@ def check_case(folder: Path, source_name: str, data: bytes, profile: bytes | Non
         machine.write_bytes(profile)
         args += ["--machine", str(machine)]
         expected.add(machine.name)
-    code, stderr, crash = run_cli(args)
+    code, stderr, crash = run_cli(args, CEILING_S)
     left = sorted(p.name for p in folder.iterdir() if p.name not in expected)
     problem = None
+    lines = target.read_bytes().count(b"\n") if code == 0 and target.exists() else 0
+    if not crash and last_cpu_s > case_budget_s(lines):
+        crash = (f"timeout: {last_cpu_s:.1f} s of CPU for {lines} lines written, more than "
+                 f"{case_budget_s(lines):.1f} s")
     if crash:
         problem = crash.strip().splitlines()[-1] if crash.startswith("timeout") else crash
     elif "Traceback" in stderr or "internal error" in stderr:
