@@ -40,7 +40,7 @@ from nurbsfeed.planning.reach_pass import (
 )
 from nurbsfeed.planning.reach_rows import B_FLOOR, ROWS_PER_CELL, cell_rows, jerk_tangent
 from nurbsfeed.planning.reach_sets import level_interval
-from tests.bench.dense_curves import axis_toolpaths
+from tests.bench.dense_curves import axis_bend, axis_toolpaths
 
 DEFAULT = load_machine("default")
 # a cubic out of the plane (the normal jerk's polygon rows), 30 mm: 114 cells under the default
@@ -48,9 +48,7 @@ CURVE = NurbsCurve.build(3, [0, 0, 0, 0, 1, 1, 1, 1],
                          [[0, 0, 0], [10, 5, 2], [20, -5, -2], [30, 0, 3]], None, "bent-cubic")
 # 40 mm along X, a bend of about 1 mm radius, 40 mm along Y: at 100 mm/s the motion cruises on
 # both legs and slows for the bend
-BEND = NurbsCurve.build(3, [0, 0, 0, 0, 0.45, 0.5, 0.55, 1, 1, 1, 1],
-                        [[0, 0, 0], [20, 0, 0], [40, 0, 0], [41, 0, 0], [41, 1, 0],
-                         [41, 21, 0], [41, 41, 0]], None, "bend")
+BEND = axis_bend()
 ROW_REL = 1e-6  # of a row's terms: what the passes' own tolerances (1e-7 at most) may break it by
 SET_REL = 1e-6  # of b: how far outside a set the forward pass may stand (its start check's)
 

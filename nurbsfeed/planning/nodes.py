@@ -92,10 +92,14 @@ def _cruising(s_mm: np.ndarray, sizing: np.ndarray, cruise_mm_s: np.ndarray,
     off = s_mm[~at_feed]
     if off.size == 0:
         return at_feed
-    after = np.minimum(np.searchsorted(off, s_mm), off.size - 1)
+    return at_feed & (_distance_to(off, s_mm) > margin_s)
+
+
+def _distance_to(points: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """The distance from each of x to the nearest of points (ascending, at least one)."""
+    after = np.minimum(np.searchsorted(points, x), points.size - 1)
     before = np.maximum(after - 1, 0)
-    near = np.minimum(np.abs(s_mm - off[before]), np.abs(off[after] - s_mm))
-    return at_feed & (near > margin_s)
+    return np.minimum(np.abs(x - points[before]), np.abs(points[after] - x))
 
 
 @jit
@@ -201,9 +205,7 @@ def schedule_nodes(curve: NurbsCurve, grid: Grid, lim: Limits, rest_nodes: np.nd
     # no motion between the two rests passes
     still = ~rest & ~(v > 0.0)
     if still.any():
-        rest_s = s_mm[rest]
-        at = np.clip(np.searchsorted(rest_s, s_mm), 1, rest_s.size - 1)
-        d = np.minimum(np.abs(s_mm - rest_s[at - 1]), np.abs(rest_s[at] - s_mm))
+        d = _distance_to(s_mm[rest], s_mm)
         v = np.where(still, 0.5 * (6.0 * d) ** (2.0 / 3.0) * jerk ** (1.0 / 3.0), v)
     # cells in which even the limit spends more than CELL_PERIODS periods are cut (a cruise's,
     # CRUISE_CUT_PERIODS: between two nodes that cruise, all do)
@@ -235,8 +237,7 @@ def _seeded(curve: NurbsCurve, grid: Grid, s_mm: np.ndarray, u: np.ndarray, rest
     lo, hi = float(seed_s[0]), float(seed_s[-1])
     keep = (s_mm < lo - floor) | (s_mm > hi + floor) | rest
     s_mm, u, rest, v = s_mm[keep], u[keep], rest[keep], v[keep]
-    at = np.clip(np.searchsorted(s_mm, seed_s), 1, s_mm.size - 1)
-    far = np.minimum(np.abs(seed_s - s_mm[at - 1]), np.abs(s_mm[at] - seed_s)) >= floor
+    far = _distance_to(s_mm, seed_s) >= floor
     more = seed_s[far]
     order = np.argsort(np.concatenate([s_mm, more]), kind="stable")
     return (np.concatenate([s_mm, more])[order],
@@ -288,9 +289,7 @@ def _insert(curve: NurbsCurve, grid: Grid, s_mm: np.ndarray, u: np.ndarray, rest
         return s_mm, u, rest, v
     floor = MIN_CELL_REL * max(float(s_mm[-1]), 1e-300)
     more = np.unique(np.concatenate(extra))
-    at = np.clip(np.searchsorted(s_mm, more), 1, s_mm.size - 1)
-    near = np.minimum(np.abs(more - s_mm[at - 1]), np.abs(s_mm[at] - more))
-    more = more[near >= floor]
+    more = more[_distance_to(s_mm, more) >= floor]
     if more.size > 1:
         more = more[np.concatenate(([True], np.diff(more) >= floor))]
     if more.size == 0:

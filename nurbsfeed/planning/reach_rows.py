@@ -38,18 +38,18 @@ PLANAR_REL = 1e-9  # K_s's part along B below this share of |K_s|: none
 # 100 mm/s^2 (reach_bounds.split_rows divides by it): a line after a bend, and a straight leg
 # after a cusp, found no motion. What such a share adds is below 1e-12 (u + 3 a + b): nothing.
 ZERO_REL = 1e-12
-
-
-@jit
-def _share(value, size):
-    """value, or 0 where it is below ZERO_REL of size."""
-    return value if abs(value) > ZERO_REL * size else 0.0
 B_FLOOR = 1e-12  # the least linearisation point
 # per point at most: cap, b >= 0, 2 tangential accelerations, 6 axis accelerations, the normal
 # jerk's half polygon, 2 tangential and 6 axis jerks; per cell three points, the middle control
 # point's two bounds and two floors
 ROWS_PER_POINT = 2 + 2 + 6 + NORMAL_SIDES // 2 + 1 + 2 + 6
 ROWS_PER_CELL = 3 * ROWS_PER_POINT + 4
+
+
+@jit
+def _share(value, size):
+    """value, or 0 where it is below ZERO_REL of size."""
+    return value if abs(value) > ZERO_REL * size else 0.0
 
 
 @jit
@@ -133,12 +133,13 @@ def point_rows(g, b0, lim, with_jerk, xb, xu, ya, rows, r):
     if not with_jerk:
         return r
     slope, bound = jerk_tangent(jerk_t, 0.0, b0)
+    ks_scale = max(ks_size, 1.0)
     r = _put(rows, r, -k * k + slope, 0.0, 1.0, bound, xb, xu, ya)
     r = _put(rows, r, k * k + slope, 0.0, -1.0, bound, xb, xu, ya)
     for x in range(3):
         jerk_x = lim[7 + x]
         tx, kx = _share(g[G_T + x], 1.0), _share(g[G_K + x], k_size)
-        ksx_ = _share(g[G_KS + x], max(ks_size, 1.0))
+        ksx_ = _share(g[G_KS + x], ks_scale)
         if jerk_x == np.inf or (tx == 0.0 and kx == 0.0 and ksx_ == 0.0):
             continue
         slope, bound = jerk_tangent(jerk_x, abs(g[G_D + x]) / period, b0)

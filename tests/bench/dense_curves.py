@@ -48,7 +48,7 @@ def _helix(radius_mm: float, pitch_mm: float, turns: float, samples: int) -> np.
                             pitch_mm * t / (2 * np.pi)])
 
 
-def _axis_bend() -> NurbsCurve:
+def axis_bend() -> NurbsCurve:
     """40 mm along X, a bend of about 1 mm radius, 40 mm along Y: a toolpath's corner as the
     CAM rounds it, in one cubic (the legs are exactly straight, along the axes)."""
     return NurbsCurve.build(3, [0, 0, 0, 0, 0.45, 0.5, 0.55, 1, 1, 1, 1],
@@ -125,7 +125,7 @@ def dense_curves(quick: bool = False) -> list[NurbsCurve]:
         # a 3-turn helical ramp, radius 10 mm, pitch 2 mm: the torsion term and Z
         _fitted("helix", _helix(10.0, 2.0, 3.0, 181)),
         # a toolpath's corner: straight legs along X and Y, a 1 mm bend between
-        _axis_bend(),
+        axis_bend(),
         # a 30 x 20 mm pocket's outline with 2 mm corners: lines and exact arcs, knots where the
         # curvature jumps
         _pocket(30.0, 20.0, 2.0),

@@ -295,7 +295,8 @@ def check_case(folder: Path, source_name: str, data: bytes, profile: bytes | Non
     code, stderr, crash = run_cli(args, CEILING_S)
     left = sorted(p.name for p in folder.iterdir() if p.name not in expected)
     problem = None
-    lines = target.read_bytes().count(b"\n") if code == 0 and target.exists() else 0
+    output = target.read_bytes() if code == 0 and target.exists() else b""
+    lines = output.count(b"\n")
     if not crash and last_cpu_s > case_budget_s(lines):
         crash = (f"timeout: {last_cpu_s:.1f} s of CPU for {lines} lines written, more than "
                  f"{case_budget_s(lines):.1f} s")
@@ -317,7 +318,6 @@ def check_case(folder: Path, source_name: str, data: bytes, profile: bytes | Non
         if not target.exists():
             problem = "exit 0 without an output file"
         else:
-            output = target.read_bytes()
             # the reader's rule (docs/programs.md, Inputs): a .json file, or any whose first
             # character other than white space is "{" (a sample spliced whole into an .ngc is JSON)
             is_json = source.suffix.lower() == ".json" or data.lstrip().startswith(b"{")
