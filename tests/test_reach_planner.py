@@ -36,10 +36,10 @@ from nurbsfeed.planning.reach_pass import (
     controllable,
     forward,
     highest,
+    level_interval,
     motion_time,
 )
 from nurbsfeed.planning.reach_rows import B_FLOOR, ROWS_PER_CELL, cell_rows, jerk_tangent
-from nurbsfeed.planning.reach_sets import level_interval
 from tests.bench.dense_curves import axis_bend, axis_toolpaths
 
 DEFAULT = load_machine("default")

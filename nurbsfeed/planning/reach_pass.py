@@ -28,8 +28,8 @@ from nurbsfeed.planning.reach_sets import (
     MAX_LEVELS,
     WIDE_PROBES,
     chain_of,
-    level_interval,
     levels,
+    on_side,
     probes_around,
 )
 from nurbsfeed.planning.schedule import GAUSS_W, GAUSS_X
@@ -92,6 +92,46 @@ def controllable(h, g0, gm, g1, b_knot, b_mid, floors, lims, end_kind, end_p1, e
         if m == 0:
             return j
     return -1
+
+
+@jit
+def level_interval(chain, row, n, extreme, c, sign, idx):
+    """The interval [lo, hi] of a1 where the chain (chain[0], chain[row]) (n points) is on
+    c's side: sign 1, the concave chain >= c (highest at extreme); sign -1, the convex one <=
+    c (lowest at extreme); and d lo / dc, d hi / dc. Empty (lo > hi) when its extreme is not.
+    Each end is found from where it was last (idx[0], idx[1] for sign 1, idx[2], idx[3] for
+    -1: the sets' boundaries move little between the evaluations of one knot) and interpolated
+    from the point inside it, so that c at the extreme gives the extreme's a1 exactly on both
+    sides. (The chain is indexed, never sliced: a slice's reference count costs more than the
+    search.) The forward pass reads the chain with it once a knot; reach_sets._level, which
+    reads it at every step of its searches, has the same lines written out (a call costs
+    more there than the reading)."""
+    if not on_side(chain[row, extreme], c, sign):
+        return 1.0, -1.0, 0.0, 0.0
+    slot = 0 if sign > 0.0 else 2
+    k = min(max(idx[slot], 0), extreme)
+    while k < extreme and not on_side(chain[row, k], c, sign):
+        k += 1
+    while k > 0 and on_side(chain[row, k - 1], c, sign):
+        k -= 1
+    idx[slot] = k
+    if k == 0:
+        lo, dlo = chain[0, 0], 0.0
+    else:
+        slope = (chain[0, k] - chain[0, k - 1]) / (chain[row, k] - chain[row, k - 1])
+        lo, dlo = chain[0, k] - (chain[row, k] - c) * slope, slope
+    k = min(max(idx[slot + 1], extreme), n - 1)
+    while k > extreme and not on_side(chain[row, k], c, sign):
+        k -= 1
+    while k < n - 1 and on_side(chain[row, k + 1], c, sign):
+        k += 1
+    idx[slot + 1] = k
+    if k == n - 1:
+        hi, dhi = chain[0, n - 1], 0.0
+    else:
+        slope = (chain[0, k + 1] - chain[0, k]) / (chain[row, k + 1] - chain[row, k])
+        hi, dhi = chain[0, k] + (c - chain[row, k]) * slope, slope
+    return lo, hi, dlo, dhi
 
 
 @jit

@@ -16,7 +16,7 @@ For one level a the question is one-dimensional in b. With a1 = a + h u the next
 gamma = (upper boundary of K_j+1) - h a1, concave, and gamma_lo likewise, convex (the *chain*
 the knot reads); cell j's rows keep a1 between affine functions of b. The gap between the
 least upper and the greatest lower bound on a1 is concave in b: Newton's method on it from
-outside the feasible interval reaches its ends without crossing them (`_upper_end`), started
+outside the feasible interval reaches its ends without crossing them (`_level`), started
 from the next knot's boundary at the same acceleration (the sets change little from one knot
 to the next). The levels of a knot span the accelerations its set reaches: probed at given
 accelerations, the ends found by bisection (`levels`).
@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from nurbsfeed.jit import jit
+from nurbsfeed.jit import inline, jit
 from nurbsfeed.planning.reach_bounds import GAP_TOL_REL, b_bounds
 
 WIDE_PROBES = 12  # accelerations every set is probed at, evenly over [-A_t, A_t] ...
@@ -53,169 +53,37 @@ SHRINK_REL = 1e-7
 INFEASIBLE = -1.0
 
 
-@jit
-def _inside(v, c, sign):
+@inline
+def on_side(v, c, sign):
     """v on the level set's side of c: v >= c (sign 1) or v <= c (sign -1)."""
     return v >= c if sign > 0.0 else v <= c
 
 
-@jit
-def level_interval(chain, row, n, extreme, c, sign, idx):
-    """The interval [lo, hi] of a1 where the chain (chain[0], chain[row]) (n points) is on
-    c's side: sign 1, the concave chain >= c (highest at extreme); sign -1, the convex one <=
-    c (lowest at extreme); and d lo / dc, d hi / dc. Empty (lo > hi) when its extreme is not.
-    Each end is found from where it was last (idx[0], idx[1] for sign 1, idx[2], idx[3] for
-    -1: the sets' boundaries move little between the evaluations of one knot) and interpolated
-    from the point inside it, so that c at the extreme gives the extreme's a1 exactly on both
-    sides. (The chain is indexed, never sliced: a slice's reference count costs more than the
-    search.)"""
-    if not _inside(chain[row, extreme], c, sign):
-        return 1.0, -1.0, 0.0, 0.0
-    slot = 0 if sign > 0.0 else 2
-    k = min(max(idx[slot], 0), extreme)
-    while k < extreme and not _inside(chain[row, k], c, sign):
-        k += 1
-    while k > 0 and _inside(chain[row, k - 1], c, sign):
-        k -= 1
-    idx[slot] = k
-    if k == 0:
-        lo, dlo = chain[0, 0], 0.0
-    else:
-        slope = (chain[0, k] - chain[0, k - 1]) / (chain[row, k] - chain[row, k - 1])
-        lo, dlo = chain[0, k] - (chain[row, k] - c) * slope, slope
-    k = min(max(idx[slot + 1], extreme), n - 1)
-    while k > extreme and not _inside(chain[row, k], c, sign):
-        k -= 1
-    while k < n - 1 and _inside(chain[row, k + 1], c, sign):
-        k += 1
-    idx[slot + 1] = k
-    if k == n - 1:
-        hi, dhi = chain[0, n - 1], 0.0
-    else:
-        slope = (chain[0, k + 1] - chain[0, k]) / (chain[row, k + 1] - chain[row, k])
-        hi, dhi = chain[0, k] + (c - chain[row, k]) * slope, slope
-    return lo, hi, dlo, dhi
-
-
-@jit
-def _gap(level, nu, nd, a, b, h, chain, nc, peak, valley, idx):
-    """The least upper bound on a1 minus the greatest lower one at state (b, a), and its slope
-    in b (concave in b: its feasible b are an interval). level (4, R): the upper bounds'
-    values at b = 0 at this level and their slopes in b, the lower bounds' likewise; chain
-    (3, L): the next knot's levels' a1, gamma and gamma_lo (nc of them; none for the last
-    cell, whose u the end fixes)."""
-    up = np.inf
-    up_slope = 0.0
-    for r in range(nu):
-        value = level[0, r] + level[1, r] * b
-        if value < up:
-            up, up_slope = value, level[1, r]
-    dn = -np.inf
-    dn_slope = 0.0
-    for r in range(nd):
-        value = level[2, r] + level[3, r] * b
-        if value > dn:
-            dn, dn_slope = value, level[3, r]
-    if nc == 0:
-        return up - dn, up_slope - dn_slope
-    c = b + h * a
-    top, bottom = chain[1, peak], chain[2, valley]
-    rounding = ROUNDING_REL * (abs(c) + abs(top) + abs(bottom))
-    lo, hi, dlo, dhi = level_interval(chain, 1, nc, peak, min(c, top) if c - top <= rounding
-                                      else c, 1.0, idx)
-    if lo > hi:
-        return -np.inf, -1.0
-    if hi < up:
-        up, up_slope = hi, dhi
-    if lo > dn:
-        dn, dn_slope = lo, dlo
-    lo, hi, dlo, dhi = level_interval(chain, 2, nc, valley, max(c, bottom) if bottom - c
-                                      <= rounding else c, -1.0, idx)
-    if lo > hi:
-        return -np.inf, 1.0
-    if hi < up:
-        up, up_slope = hi, dhi
-    if lo > dn:
-        dn, dn_slope = lo, dlo
-    return up - dn, up_slope - dn_slope
-
-
-@jit
-def _bisect(level, nu, nd, a, h, chain, nc, peak, valley, idx, good, bad, tol):
-    """The end of the feasible interval between a feasible b (good) and an infeasible one."""
-    for _ in range(BISECTIONS):
-        mid = 0.5 * (good + bad)
-        gap, _ = _gap(level, nu, nd, a, mid, h, chain, nc, peak, valley, idx)
-        if gap >= -tol:
-            good = mid
-        else:
-            bad = mid
-    return good
-
-
-@jit
-def _upper_end(level, nu, nd, a, h, chain, nc, peak, valley, idx, low, high, b, tol):
-    """The greatest feasible b in [low, high], by Newton's method inward from b (the tangent
-    of the concave gap lies above it: from outside it never steps past the end), and where b
-    turns out feasible, or below the feasible interval, from high; bisection against low
-    where a kink leaves Newton no step. -1 where no b in [low, high] is feasible."""
-    gap, slope = _gap(level, nu, nd, a, b, h, chain, nc, peak, valley, idx)
-    if b < high and (gap >= -tol or slope > 0.0):
-        b = high
-        gap, slope = _gap(level, nu, nd, a, b, h, chain, nc, peak, valley, idx)
-    for _ in range(NEWTON_STEPS):
-        if gap >= -tol:
-            return b
-        step = b - gap / slope if slope < 0.0 and gap > -np.inf else low
-        if step <= low:
-            gap, _ = _gap(level, nu, nd, a, low, h, chain, nc, peak, valley, idx)
-            if gap < -tol:
-                return -1.0
-            return _bisect(level, nu, nd, a, h, chain, nc, peak, valley, idx, low, b, tol)
-        b = step
-        gap, slope = _gap(level, nu, nd, a, b, h, chain, nc, peak, valley, idx)
-    return -1.0
-
-
-@jit
-def _lower_end(level, nu, nd, a, h, chain, nc, peak, valley, idx, low, top, b, tol):
-    """The least feasible b in [low, top] (top feasible), as `_upper_end` mirrored: Newton's
-    method from b upward, from low where b turns out feasible or above the interval."""
-    gap, slope = _gap(level, nu, nd, a, b, h, chain, nc, peak, valley, idx)
-    if b > low and (gap >= -tol or slope < 0.0):
-        b = low
-        gap, slope = _gap(level, nu, nd, a, b, h, chain, nc, peak, valley, idx)
-    for _ in range(NEWTON_STEPS):
-        if gap >= -tol:
-            return b
-        step = b - gap / slope if slope > 0.0 and gap > -np.inf else top
-        if step >= top:
-            return _bisect(level, nu, nd, a, h, chain, nc, peak, valley, idx, top, b, tol)
-        b = step
-        gap, slope = _gap(level, nu, nd, a, b, h, chain, nc, peak, valley, idx)
-    return top
-
-
-@jit
-def _guess(chain, row, nc, h, a):
-    """The next knot's boundary (chain[row] = boundary - h a1) at acceleration a: the first
-    guess of this knot's; -1 outside it."""
-    if nc == 0 or a < chain[0, 0] or a > chain[0, nc - 1]:
-        return -1.0
-    k = 0
-    while k < nc - 2 and chain[0, k + 1] < a:
-        k += 1
-    if nc == 1 or chain[0, k + 1] <= chain[0, k]:
-        return chain[row, k] + h * a
-    w = (a - chain[0, k]) / (chain[0, k + 1] - chain[0, k])
-    return (1.0 - w) * chain[row, k] + w * chain[row, k + 1] + h * a
+FIRST, NEWTON, INNER, BISECT = 0, 1, 2, 3  # the phases of a search in `_level`
 
 
 @jit
 def _level(cell, a, h, chain, nc, peak, valley, scale, level, idx):
-    """(high, low): the greatest and least b at acceleration a from which the cell's rows lead
-    into the next knot's set; INFEASIBLE twice where none does. cell = (up, down, bounds, U,
-    D, B, a_min, a_max) as `reach_bounds.split_rows` gives them; level (4, R): scratch."""
+    """(high, low): the greatest and least b at acceleration a from which some u keeps the
+    cell's rows and leads into the next knot's set (chain); INFEASIBLE twice where none does.
+    cell = (up, down, bounds, U, D, B, a_min, a_max) as `reach_bounds.split_rows` gives them;
+    level (4, R): scratch, for the bounds on a1 at this acceleration (the upper bounds'
+    values at b = 0 and their slopes in b, the lower bounds' likewise); chain (3, L): the
+    next knot's levels' a1, gamma and gamma_lo (nc of them; none for the last cell, whose u
+    the end fixes).
+
+    Each end by Newton's method on the gap (the least upper bound on a1 minus the greatest
+    lower one, concave in b: its feasible b are an interval) from outside the interval: the
+    tangent lies above the gap, so a step never passes the end. It starts from the next
+    knot's boundary at the same acceleration, WARM_REL outside it (the sets change little
+    from one knot to the next); where that turns out feasible or beyond the interval, from
+    the far side (high for the top, low for the bottom); where a kink leaves Newton's method
+    no step, bisection against the inner side (low, once found feasible, for the top; the
+    top for the bottom).
+
+    All of it is one function, and the gap is evaluated in one place, in its loop, the chain
+    read there rather than by `level_interval`: a call that takes arrays costs an atomic
+    reference count on each, which was half of the passes' time."""
     up, down, bounds, nu, nd, nb, a_min, a_max = cell
     if a < a_min or a > a_max:
         return INFEASIBLE, INFEASIBLE
@@ -236,15 +104,141 @@ def _level(cell, a, h, chain, nc, peak, valley, scale, level, idx):
         low = max(low, chain[2, valley] - h * a)
     if low > high:
         return INFEASIBLE, INFEASIBLE
-    guess = _guess(chain, np.int64(1), nc, h, a)  # (a literal: another compilation)
-    start = high if guess < 0.0 else min(max(guess * (1.0 + WARM_REL), low), high)
-    top = _upper_end(level, nu, nd, a, h, chain, nc, peak, valley, idx, low, high, start, tol)
-    if top < 0.0:
-        return INFEASIBLE, INFEASIBLE
-    guess = _guess(chain, np.int64(2), nc, h, a)
-    start = low if guess < 0.0 else min(max(guess * (1.0 - WARM_REL), low), top)
-    return top, _lower_end(level, nu, nd, a, h, chain, nc, peak, valley, idx, low, top, start,
-                           tol)
+    top = INFEASIBLE
+    bottom = INFEASIBLE
+    for end in range(2):
+        upper = end == 0
+        # the next knot's boundary at a (chain[1 + end] = boundary - h a1): the first guess
+        guess = -1.0
+        if nc > 0 and chain[0, 0] <= a <= chain[0, nc - 1]:
+            k = 0
+            while k < nc - 2 and chain[0, k + 1] < a:
+                k += 1
+            if nc == 1 or chain[0, k + 1] <= chain[0, k]:
+                guess = chain[1 + end, k] + h * a
+            else:
+                w = (a - chain[0, k]) / (chain[0, k + 1] - chain[0, k])
+                guess = (1.0 - w) * chain[1 + end, k] + w * chain[1 + end, k + 1] + h * a
+        if upper:
+            inner, far = low, high
+            x = high if guess < 0.0 else min(max(guess * (1.0 + WARM_REL), low), high)
+        else:
+            inner, far = top, low
+            x = low if guess < 0.0 else min(max(guess * (1.0 - WARM_REL), low), top)
+        last = x
+        good = bad = 0.0
+        phase = FIRST
+        steps = 0
+        found = -1.0
+        while True:
+            # the gap at x: the least upper bound on a1 (ceil) minus the greatest lower one
+            ceil = np.inf
+            ceil_slope = 0.0
+            for r in range(nu):
+                value = level[0, r] + level[1, r] * x
+                if value < ceil:
+                    ceil, ceil_slope = value, level[1, r]
+            floor = -np.inf
+            floor_slope = 0.0
+            for r in range(nd):
+                value = level[2, r] + level[3, r] * x
+                if value > floor:
+                    floor, floor_slope = value, level[3, r]
+            gap, slope = ceil - floor, ceil_slope - floor_slope
+            if nc > 0:
+                c = x + h * a
+                c_top, c_bottom = chain[1, peak], chain[2, valley]
+                rounding = ROUNDING_REL * (abs(c) + abs(c_top) + abs(c_bottom))
+                for side in range(2):
+                    # where the concave chain (chain[0], chain[1]) is >= c, then where the convex
+                    # one (chain[0], chain[2]) is <= c (reach_pass.level_interval, written out)
+                    row, sign, extreme = (1, 1.0, peak) if side == 0 else (2, -1.0, valley)
+                    cc = (min(c, c_top) if c - c_top <= rounding else c) if side == 0 else \
+                        (max(c, c_bottom) if c_bottom - c <= rounding else c)
+                    if not on_side(chain[row, extreme], cc, sign):
+                        gap, slope = -np.inf, -sign
+                        break
+                    slot = 2 * side
+                    k = min(max(idx[slot], 0), extreme)
+                    while k < extreme and not on_side(chain[row, k], cc, sign):
+                        k += 1
+                    while k > 0 and on_side(chain[row, k - 1], cc, sign):
+                        k -= 1
+                    idx[slot] = k
+                    if k == 0:
+                        lo, dlo = chain[0, 0], 0.0
+                    else:
+                        w = (chain[0, k] - chain[0, k - 1]) / (chain[row, k] - chain[row, k - 1])
+                        lo, dlo = chain[0, k] - (chain[row, k] - cc) * w, w
+                    k = min(max(idx[slot + 1], extreme), nc - 1)
+                    while k > extreme and not on_side(chain[row, k], cc, sign):
+                        k -= 1
+                    while k < nc - 1 and on_side(chain[row, k + 1], cc, sign):
+                        k += 1
+                    idx[slot + 1] = k
+                    if k == nc - 1:
+                        hi, dhi = chain[0, nc - 1], 0.0
+                    else:
+                        w = (chain[0, k + 1] - chain[0, k]) / (chain[row, k + 1] - chain[row, k])
+                        hi, dhi = chain[0, k] + (cc - chain[row, k]) * w, w
+                    if lo > hi:
+                        gap, slope = -np.inf, -sign
+                        break
+                    if hi < ceil:
+                        ceil, ceil_slope = hi, dhi
+                    if lo > floor:
+                        floor, floor_slope = lo, dlo
+                    gap, slope = ceil - floor, ceil_slope - floor_slope
+            if phase == BISECT:
+                if gap >= -tol:
+                    good = x
+                else:
+                    bad = x
+                steps += 1
+                if steps == BISECTIONS:
+                    found = good
+                    break
+                x = 0.5 * (good + bad)
+                continue
+            if phase == INNER:
+                if gap < -tol:
+                    found = -1.0
+                    break
+                phase, steps, good, bad = BISECT, 0, inner, last
+                x = 0.5 * (good + bad)
+                continue
+            if phase == FIRST:
+                phase = NEWTON
+                outward = slope > 0.0 if upper else slope < 0.0
+                if (x < far if upper else x > far) and (gap >= -tol or outward):
+                    x = far
+                    continue
+            if steps == NEWTON_STEPS:
+                found = -1.0 if upper else inner
+                break
+            if gap >= -tol:
+                found = x
+                break
+            inward = slope < 0.0 if upper else slope > 0.0
+            step = x - gap / slope if inward and gap > -np.inf else inner
+            if step <= inner if upper else step >= inner:
+                last = x
+                if upper:
+                    phase = INNER
+                    x = inner
+                else:
+                    phase, steps, good, bad = BISECT, 0, inner, x
+                    x = 0.5 * (good + bad)
+                continue
+            x = step
+            steps += 1
+        if upper:
+            top = found
+            if top < 0.0:
+                return INFEASIBLE, INFEASIBLE
+        else:
+            bottom = found
+    return top, bottom
 
 
 @jit
