@@ -118,20 +118,6 @@ def b_top(bounds, nb, a_lo, a_hi):
 
 
 @jit
-def b_bounds(bounds, nb, a):
-    """The bounds on b of the rows without u at acceleration a: (low, high)."""
-    low = 0.0
-    high = np.inf
-    for r in range(nb):
-        v = bounds[r, 1] + bounds[r, 2] * a
-        if bounds[r, 0] > 0.0:
-            high = min(high, v)
-        else:
-            low = max(low, v)
-    return low, high
-
-
-@jit
 def fold_end(rows, n, h, end_kind, p1, p2, out):
     """The last cell's rows with its u fixed by the end it runs into, as rows over (b, a) alone
     (u = 0 in them) into out; returns the count. end_kind 0: a rest after a rest cell p1 long

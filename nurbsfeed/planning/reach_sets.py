@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from nurbsfeed.jit import inline, jit
-from nurbsfeed.planning.reach_bounds import GAP_TOL_REL, b_bounds
+from nurbsfeed.planning.reach_bounds import GAP_TOL_REL
 
 WIDE_PROBES = 12  # accelerations every set is probed at, evenly over [-A_t, A_t] ...
 # ... and, once a motion is known, this many more within FOCUS_REL A_t of its acceleration,
@@ -63,14 +63,17 @@ FIRST, NEWTON, INNER, BISECT = 0, 1, 2, 3  # the phases of a search in `_level`
 
 
 @jit
-def _level(cell, a, h, chain, nc, peak, valley, scale, level, idx):
-    """(high, low): the greatest and least b at acceleration a from which some u keeps the
-    cell's rows and leads into the next knot's set (chain); INFEASIBLE twice where none does.
-    cell = (up, down, bounds, U, D, B, a_min, a_max) as `reach_bounds.split_rows` gives them;
-    level (4, R): scratch, for the bounds on a1 at this acceleration (the upper bounds'
-    values at b = 0 and their slopes in b, the lower bounds' likewise); chain (3, L): the
-    next knot's levels' a1, gamma and gamma_lo (nc of them; none for the last cell, whose u
-    the end fixes).
+def _probe(cell, h, chain, nc, peak, valley, probes, count, scale, probe_hi, probe_lo, level,
+           idx):
+    """The set at the accelerations probes[:count] (ascending): at each, into probe_hi and
+    probe_lo, the greatest and least b from which some u keeps the cell's rows and leads into
+    the next knot's set, INFEASIBLE twice where none does; returns the first and last feasible
+    probe (-1: none). The set is convex: the first infeasible probe after a feasible one ends
+    the run. cell = (up, down, bounds, U, D, B, a_min, a_max) as `reach_bounds.split_rows`
+    gives them; level (4, R): scratch, the bounds on a1 at one acceleration (the upper ones'
+    values at b = 0 and their slopes in b, the lower ones' likewise); chain (3, L): the next
+    knot's levels' a1, gamma and gamma_lo (nc of them; none for the last cell, whose u the
+    end fixes).
 
     Each end by Newton's method on the gap (the least upper bound on a1 minus the greatest
     lower one, concave in b: its feasible b are an interval) from outside the interval: the
@@ -81,164 +84,197 @@ def _level(cell, a, h, chain, nc, peak, valley, scale, level, idx):
     no step, bisection against the inner side (low, once found feasible, for the top; the
     top for the bottom).
 
-    All of it is one function, and the gap is evaluated in one place, in its loop, the chain
-    read there rather than by `level_interval`: a call that takes arrays costs an atomic
-    reference count on each, which was half of the passes' time."""
+    All of it is one function, the probes its outer loop, and the gap is evaluated in one
+    place, its inner loop, which reads the chain itself rather than through
+    `reach_pass.level_interval`: a call that takes arrays costs an atomic reference count on
+    each, which was over half of the backward passes' time."""
     up, down, bounds, nu, nd, nb, a_min, a_max = cell
-    if a < a_min or a > a_max:
-        return INFEASIBLE, INFEASIBLE
-    low, high = b_bounds(bounds, nb, a)
-    if low > high:
-        return INFEASIBLE, INFEASIBLE
-    if nc == 0 and nu + nd == 0:
-        return high, low
-    for r in range(nu):
-        level[0, r] = up[r, 0] + up[r, 1] * a
-        level[1, r] = up[r, 2]
-    for r in range(nd):
-        level[2, r] = down[r, 0] + down[r, 1] * a
-        level[3, r] = down[r, 2]
     tol = GAP_TOL_REL * scale
-    if nc > 0:
-        high = min(high, chain[1, peak] - h * a)
-        low = max(low, chain[2, valley] - h * a)
-    if low > high:
-        return INFEASIBLE, INFEASIBLE
-    top = INFEASIBLE
-    bottom = INFEASIBLE
-    for end in range(2):
-        upper = end == 0
-        # the next knot's boundary at a (chain[1 + end] = boundary - h a1): the first guess
-        guess = -1.0
-        if nc > 0 and chain[0, 0] <= a <= chain[0, nc - 1]:
-            k = 0
-            while k < nc - 2 and chain[0, k + 1] < a:
-                k += 1
-            if nc == 1 or chain[0, k + 1] <= chain[0, k]:
-                guess = chain[1 + end, k] + h * a
-            else:
-                w = (a - chain[0, k]) / (chain[0, k + 1] - chain[0, k])
-                guess = (1.0 - w) * chain[1 + end, k] + w * chain[1 + end, k + 1] + h * a
-        if upper:
-            inner, far = low, high
-            x = high if guess < 0.0 else min(max(guess * (1.0 + WARM_REL), low), high)
-        else:
-            inner, far = top, low
-            x = low if guess < 0.0 else min(max(guess * (1.0 - WARM_REL), low), top)
-        last = x
-        good = bad = 0.0
-        phase = FIRST
-        steps = 0
-        found = -1.0
-        while True:
-            # the gap at x: the least upper bound on a1 (ceil) minus the greatest lower one
-            ceil = np.inf
-            ceil_slope = 0.0
+    no_rows = nc == 0 and nu + nd == 0
+    first = -1
+    final = -1
+    for p in range(count):
+        a = probes[p]
+        b_hi = b_lo = INFEASIBLE
+        low, high = 1.0, -1.0  # (none: a outside the range the rows allow)
+        if a_min <= a <= a_max:
+            # the rows without u bound b alone
+            low, high = 0.0, np.inf
+            for r in range(nb):
+                value = bounds[r, 1] + bounds[r, 2] * a
+                if bounds[r, 0] > 0.0:
+                    high = min(high, value)
+                else:
+                    low = max(low, value)
+        searching = not low > high and not no_rows
+        if searching:
             for r in range(nu):
-                value = level[0, r] + level[1, r] * x
-                if value < ceil:
-                    ceil, ceil_slope = value, level[1, r]
-            floor = -np.inf
-            floor_slope = 0.0
+                level[0, r] = up[r, 0] + up[r, 1] * a
+                level[1, r] = up[r, 2]
             for r in range(nd):
-                value = level[2, r] + level[3, r] * x
-                if value > floor:
-                    floor, floor_slope = value, level[3, r]
-            gap, slope = ceil - floor, ceil_slope - floor_slope
+                level[2, r] = down[r, 0] + down[r, 1] * a
+                level[3, r] = down[r, 2]
             if nc > 0:
-                c = x + h * a
-                c_top, c_bottom = chain[1, peak], chain[2, valley]
-                rounding = ROUNDING_REL * (abs(c) + abs(c_top) + abs(c_bottom))
-                for side in range(2):
-                    # where the concave chain (chain[0], chain[1]) is >= c, then where the convex
-                    # one (chain[0], chain[2]) is <= c (reach_pass.level_interval, written out)
-                    row, sign, extreme = (1, 1.0, peak) if side == 0 else (2, -1.0, valley)
-                    cc = (min(c, c_top) if c - c_top <= rounding else c) if side == 0 else \
-                        (max(c, c_bottom) if c_bottom - c <= rounding else c)
-                    if not on_side(chain[row, extreme], cc, sign):
-                        gap, slope = -np.inf, -sign
-                        break
-                    slot = 2 * side
-                    k = min(max(idx[slot], 0), extreme)
-                    while k < extreme and not on_side(chain[row, k], cc, sign):
-                        k += 1
-                    while k > 0 and on_side(chain[row, k - 1], cc, sign):
-                        k -= 1
-                    idx[slot] = k
-                    if k == 0:
-                        lo, dlo = chain[0, 0], 0.0
-                    else:
-                        w = (chain[0, k] - chain[0, k - 1]) / (chain[row, k] - chain[row, k - 1])
-                        lo, dlo = chain[0, k] - (chain[row, k] - cc) * w, w
-                    k = min(max(idx[slot + 1], extreme), nc - 1)
-                    while k > extreme and not on_side(chain[row, k], cc, sign):
-                        k -= 1
-                    while k < nc - 1 and on_side(chain[row, k + 1], cc, sign):
-                        k += 1
-                    idx[slot + 1] = k
-                    if k == nc - 1:
-                        hi, dhi = chain[0, nc - 1], 0.0
-                    else:
-                        w = (chain[0, k + 1] - chain[0, k]) / (chain[row, k + 1] - chain[row, k])
-                        hi, dhi = chain[0, k] + (cc - chain[row, k]) * w, w
-                    if lo > hi:
-                        gap, slope = -np.inf, -sign
-                        break
-                    if hi < ceil:
-                        ceil, ceil_slope = hi, dhi
-                    if lo > floor:
-                        floor, floor_slope = lo, dlo
-                    gap, slope = ceil - floor, ceil_slope - floor_slope
-            if phase == BISECT:
-                if gap >= -tol:
-                    good = x
+                high = min(high, chain[1, peak] - h * a)
+                low = max(low, chain[2, valley] - h * a)
+            searching = not low > high
+        elif not low > high:
+            b_hi, b_lo = high, low
+        top = bottom = INFEASIBLE
+        for end in range(2 if searching else 0):
+            upper = end == 0
+            # the next knot's boundary at a (chain[1 + end] = boundary - h a1): the first guess
+            guess = -1.0
+            if nc > 0 and chain[0, 0] <= a <= chain[0, nc - 1]:
+                k = 0
+                while k < nc - 2 and chain[0, k + 1] < a:
+                    k += 1
+                if nc == 1 or chain[0, k + 1] <= chain[0, k]:
+                    guess = chain[1 + end, k] + h * a
                 else:
-                    bad = x
-                steps += 1
-                if steps == BISECTIONS:
-                    found = good
-                    break
-                x = 0.5 * (good + bad)
-                continue
-            if phase == INNER:
-                if gap < -tol:
-                    found = -1.0
-                    break
-                phase, steps, good, bad = BISECT, 0, inner, last
-                x = 0.5 * (good + bad)
-                continue
-            if phase == FIRST:
-                phase = NEWTON
-                outward = slope > 0.0 if upper else slope < 0.0
-                if (x < far if upper else x > far) and (gap >= -tol or outward):
-                    x = far
-                    continue
-            if steps == NEWTON_STEPS:
-                found = -1.0 if upper else inner
-                break
-            if gap >= -tol:
-                found = x
-                break
-            inward = slope < 0.0 if upper else slope > 0.0
-            step = x - gap / slope if inward and gap > -np.inf else inner
-            if step <= inner if upper else step >= inner:
-                last = x
-                if upper:
-                    phase = INNER
-                    x = inner
-                else:
-                    phase, steps, good, bad = BISECT, 0, inner, x
+                    w = (a - chain[0, k]) / (chain[0, k + 1] - chain[0, k])
+                    guess = (1.0 - w) * chain[1 + end, k] + w * chain[1 + end, k + 1] + h * a
+            if upper:
+                inner, far = low, high
+                x = high if guess < 0.0 else min(max(guess * (1.0 + WARM_REL), low), high)
+            else:
+                inner, far = top, low
+                x = low if guess < 0.0 else min(max(guess * (1.0 - WARM_REL), low), top)
+            beyond = x
+            good = bad = 0.0
+            phase = FIRST
+            steps = 0
+            found = -1.0
+            while True:
+                # the gap at x: the least upper bound on a1 (ceil) minus the greatest lower one
+                ceil = np.inf
+                ceil_slope = 0.0
+                for r in range(nu):
+                    value = level[0, r] + level[1, r] * x
+                    if value < ceil:
+                        ceil, ceil_slope = value, level[1, r]
+                floor = -np.inf
+                floor_slope = 0.0
+                for r in range(nd):
+                    value = level[2, r] + level[3, r] * x
+                    if value > floor:
+                        floor, floor_slope = value, level[3, r]
+                gap, slope = ceil - floor, ceil_slope - floor_slope
+                if nc > 0:
+                    c = x + h * a
+                    c_top, c_bottom = chain[1, peak], chain[2, valley]
+                    rounding = ROUNDING_REL * (abs(c) + abs(c_top) + abs(c_bottom))
+                    for side in range(2):
+                        # where the concave chain (chain[0], chain[1]) is >= c, then where the
+                        # convex one (chain[0], chain[2]) is <= c: level_interval's lines
+                        row, sign, extreme = (1, 1.0, peak) if side == 0 else (2, -1.0, valley)
+                        cc = (min(c, c_top) if c - c_top <= rounding else c) if side == 0 \
+                            else (max(c, c_bottom) if c_bottom - c <= rounding else c)
+                        if not on_side(chain[row, extreme], cc, sign):
+                            gap, slope = -np.inf, -sign
+                            break
+                        slot = 2 * side
+                        k = min(max(idx[slot], 0), extreme)
+                        while k < extreme and not on_side(chain[row, k], cc, sign):
+                            k += 1
+                        while k > 0 and on_side(chain[row, k - 1], cc, sign):
+                            k -= 1
+                        idx[slot] = k
+                        if k == 0:
+                            lo, dlo = chain[0, 0], 0.0
+                        else:
+                            w = (chain[0, k] - chain[0, k - 1]) \
+                                / (chain[row, k] - chain[row, k - 1])
+                            lo, dlo = chain[0, k] - (chain[row, k] - cc) * w, w
+                        k = min(max(idx[slot + 1], extreme), nc - 1)
+                        while k > extreme and not on_side(chain[row, k], cc, sign):
+                            k -= 1
+                        while k < nc - 1 and on_side(chain[row, k + 1], cc, sign):
+                            k += 1
+                        idx[slot + 1] = k
+                        if k == nc - 1:
+                            hi, dhi = chain[0, nc - 1], 0.0
+                        else:
+                            w = (chain[0, k + 1] - chain[0, k]) \
+                                / (chain[row, k + 1] - chain[row, k])
+                            hi, dhi = chain[0, k] + (cc - chain[row, k]) * w, w
+                        if lo > hi:
+                            gap, slope = -np.inf, -sign
+                            break
+                        if hi < ceil:
+                            ceil, ceil_slope = hi, dhi
+                        if lo > floor:
+                            floor, floor_slope = lo, dlo
+                        gap, slope = ceil - floor, ceil_slope - floor_slope
+                if phase == BISECT:
+                    if gap >= -tol:
+                        good = x
+                    else:
+                        bad = x
+                    steps += 1
+                    if steps == BISECTIONS:
+                        found = good
+                        break
                     x = 0.5 * (good + bad)
-                continue
-            x = step
-            steps += 1
-        if upper:
-            top = found
-            if top < 0.0:
-                return INFEASIBLE, INFEASIBLE
-        else:
-            bottom = found
-    return top, bottom
+                    continue
+                if phase == INNER:
+                    if gap < -tol:
+                        found = -1.0
+                        break
+                    phase, steps, good, bad = BISECT, 0, inner, beyond
+                    x = 0.5 * (good + bad)
+                    continue
+                if phase == FIRST:
+                    phase = NEWTON
+                    outward = slope > 0.0 if upper else slope < 0.0
+                    if (x < far if upper else x > far) and (gap >= -tol or outward):
+                        x = far
+                        continue
+                if steps == NEWTON_STEPS:
+                    found = -1.0 if upper else inner
+                    break
+                if gap >= -tol:
+                    found = x
+                    break
+                inward = slope < 0.0 if upper else slope > 0.0
+                step = x - gap / slope if inward and gap > -np.inf else inner
+                if step <= inner if upper else step >= inner:
+                    beyond = x
+                    if upper:
+                        phase = INNER
+                        x = inner
+                    else:
+                        phase, steps, good, bad = BISECT, 0, inner, x
+                        x = 0.5 * (good + bad)
+                    continue
+                x = step
+                steps += 1
+            if upper:
+                top = found
+                if top < 0.0:
+                    break
+            else:
+                bottom = found
+                b_hi, b_lo = top, bottom
+        probe_hi[p] = b_hi
+        probe_lo[p] = b_lo
+        if b_hi >= 0.0:
+            if first < 0:
+                first = p
+            final = p
+        elif first >= 0:
+            break
+    return first, final
+
+
+@jit
+def _level(cell, a, h, chain, nc, peak, valley, scale, level, idx):
+    """(high, low) at the acceleration a alone: `_probe` at one point."""
+    point = np.full(1, a)
+    hi = np.empty(1)
+    lo = np.empty(1)
+    _probe(cell, h, chain, nc, peak, valley, point, 1, scale, hi, lo, level, idx)
+    return hi[0], lo[0]
 
 
 @jit
@@ -271,26 +307,6 @@ def _store(lev_a, lev_hi, lev_lo, m, a, high, low):
         hi = lo = 0.5 * (high + low)
     lev_hi[m] = hi
     lev_lo[m] = lo
-
-
-@jit
-def _probe(cell, h, chain, nc, peak, valley, probes, count, scale, probe_hi, probe_lo, level,
-           idx):
-    """The set at probes[:count] (ascending): (first, last) feasible ones (-1: none). The set
-    is convex: the first infeasible probe after a feasible one ends the run."""
-    first = -1
-    last = -1
-    for k in range(count):
-        hi, lo = _level(cell, probes[k], h, chain, nc, peak, valley, scale, level, idx)
-        probe_hi[k] = hi
-        probe_lo[k] = lo
-        if hi >= 0.0:
-            if first < 0:
-                first = k
-            last = k
-        elif first >= 0:
-            break
-    return first, last
 
 
 @jit
