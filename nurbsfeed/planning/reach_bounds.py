@@ -56,11 +56,6 @@ def split_rows(rows, n, h, up, down, bounds):
 
 
 @jit
-def _box_value(rows, r, sign, a, b):
-    return sign * (rows[r, 0] + rows[r, 1] * a + rows[r, 2] * b)
-
-
-@jit
 def prune(rows, n, sign, a_lo, a_hi, b_hi):
     """Drops the bounds on a1 (rows (n, 3) as `split_rows` gives them: from above with sign 1,
     from below with sign -1) that another one is tighter than everywhere in the box a in
@@ -68,24 +63,25 @@ def prune(rows, n, sign, a_lo, a_hi, b_hi):
     returns their count. Of some 19 bounds a side a cell's set meets some 5: every level reads
     them all a few times. A bound is linear, so one tighter at the box's corners is tighter
     all over it; the bounds tried as the tighter one are those tightest at a corner or the
-    middle (each of them stays)."""
+    middle (each of them stays). Each bound's values there are taken once, into an array of
+    this function's own (a function that takes rows costs a reference count a call)."""
     if n <= 1:
         return n
     corners_a = (a_lo, a_lo, a_hi, a_hi, 0.5 * (a_lo + a_hi))
     corners_b = (0.0, b_hi, 0.0, b_hi, 0.5 * b_hi)
+    # every bound's value at the four corners and the middle, sign taken (lower is tighter)
+    value = np.empty((n, 5))
+    for r in range(n):
+        for c in range(5):
+            value[r, c] = sign * (rows[r, 0] + rows[r, 1] * corners_a[c]
+                                  + rows[r, 2] * corners_b[c])
     best = np.empty(5, dtype=np.int64)
     for c in range(5):
-        k = np.int64(0)  # (a literal 0 compiles _box_value a second time)
+        k = 0
         for r in range(1, n):
-            if _box_value(rows, r, sign, corners_a[c], corners_b[c]) < _box_value(
-                    rows, k, sign, corners_a[c], corners_b[c]):
+            if value[r, c] < value[k, c]:
                 k = r
         best[c] = k
-    # the tightest rows' values at the corners, kept aside: compaction overwrites the rows
-    tight = np.empty((5, 4))
-    for c in range(5):
-        for e in range(4):
-            tight[c, e] = _box_value(rows, best[c], sign, corners_a[e], corners_b[e])
     m = 0
     for r in range(n):
         dominated = False
@@ -96,7 +92,7 @@ def prune(rows, n, sign, a_lo, a_hi, b_hi):
             if not dominated:
                 tighter = True
                 for e in range(4):
-                    if not tight[c, e] <= _box_value(rows, r, sign, corners_a[e], corners_b[e]):
+                    if not value[best[c], e] <= value[r, e]:
                         tighter = False
                         break
                 dominated = tighter
