@@ -61,6 +61,7 @@ def controllable(h, g0, gm, g1, b_knot, b_mid, floors, lims, end_kind, end_p1, e
     down = np.empty((ROWS_PER_CELL + 2, 3))
     bounds = np.empty((ROWS_PER_CELL + 2, 3))
     level = np.empty((4, ROWS_PER_CELL + 2))
+    one = np.empty(3)
     lev_n[q_n] = 0
     for j in range(top, -1, -1):
         n = cell_rows(g0[j], gm[j], g1[j], h[j], b_knot[j], b_mid[j], b_knot[j + 1], floors[j],
@@ -87,7 +88,7 @@ def controllable(h, g0, gm, g1, b_knot, b_mid, floors, lims, end_kind, end_p1, e
             nd = prune(down, nd, -1.0, a_lo, a_hi, b_hi)
         m = levels((up, down, bounds, nu, nd, nb, a_min, a_max), h[j], chain, nc, peak, valley,
                    probes[:p_n], keys, acc, lev_a[j], lev_hi[j], lev_lo[j], probe_hi, probe_lo,
-                   grid, level, idx)
+                   grid, level, idx, one)
         lev_n[j] = m
         if m == 0:
             return j

@@ -268,13 +268,12 @@ def _probe(cell, h, chain, nc, peak, valley, probes, count, scale, probe_hi, pro
 
 
 @jit
-def _level(cell, a, h, chain, nc, peak, valley, scale, level, idx):
-    """(high, low) at the acceleration a alone: `_probe` at one point."""
-    point = np.full(1, a)
-    hi = np.empty(1)
-    lo = np.empty(1)
-    _probe(cell, h, chain, nc, peak, valley, point, 1, scale, hi, lo, level, idx)
-    return hi[0], lo[0]
+def _level(cell, a, h, chain, nc, peak, valley, scale, level, idx, one):
+    """(high, low) at the acceleration a alone: `_probe` at one point; one (3,): scratch (an
+    array a call allocates costs more than the search)."""
+    one[0] = a
+    _probe(cell, h, chain, nc, peak, valley, one, 1, scale, one[1:], one[2:], level, idx)
+    return one[1], one[2]
 
 
 @jit
@@ -311,7 +310,7 @@ def _store(lev_a, lev_hi, lev_lo, m, a, high, low):
 
 @jit
 def _refine(cell, h, chain, nc, peak, valley, inside, outside, hi, lo, guess, scale, level,
-            idx):
+            idx, one):
     """The acceleration range's end between a feasible probe (inside, with its hi and lo)
     and an infeasible one: (a, hi, lo) of the last feasible point found, to RANGE_TOL_REL of
     the acceleration scale. guess: where the next knot's range ends, first tried with a
@@ -323,7 +322,7 @@ def _refine(cell, h, chain, nc, peak, valley, inside, outside, hi, lo, guess, sc
         for a in (guess, guess + toward * 2.0 * tol):
             if not lo_end < a < hi_end:
                 continue
-            mh, ml = _level(cell, a, h, chain, nc, peak, valley, scale, level, idx)
+            mh, ml = _level(cell, a, h, chain, nc, peak, valley, scale, level, idx, one)
             if mh >= 0.0:
                 inside, hi, lo = a, mh, ml
             else:
@@ -332,7 +331,7 @@ def _refine(cell, h, chain, nc, peak, valley, inside, outside, hi, lo, guess, sc
             lo_end, hi_end = min(inside, outside), max(inside, outside)
     while abs(outside - inside) > tol:
         mid = 0.5 * (inside + outside)
-        mh, ml = _level(cell, mid, h, chain, nc, peak, valley, scale, level, idx)
+        mh, ml = _level(cell, mid, h, chain, nc, peak, valley, scale, level, idx, one)
         if mh >= 0.0:
             inside, hi, lo = mid, mh, ml
         else:
@@ -342,15 +341,16 @@ def _refine(cell, h, chain, nc, peak, valley, inside, outside, hi, lo, guess, sc
 
 @jit
 def levels(cell, h, chain, nc, peak, valley, probes, keys, acc, lev_a, lev_hi, lev_lo,
-           probe_hi, probe_lo, grid, level, idx):
+           probe_hi, probe_lo, grid, level, idx, one):
     """The levels of one knot's set into lev_a, lev_hi, lev_lo (probes + 2 + keys,): the set
     at the accelerations probes (P,) (ascending; FINE_PROBES times as many evenly over [-acc,
     acc] where none meets the set, in grid), the ends of the feasible ones refined against
     their infeasible neighbours; a set that half the probes miss gets its levels again, evenly
     over its refined range; and a level at each of keys (NaN: none) inside that range. Returns
-    the number of levels (0: the set is empty)."""
+    the number of levels (0: the set is empty). probe_hi, probe_lo, grid, level, idx, one:
+    scratch."""
     m = _spread(cell, h, chain, nc, peak, valley, probes, acc, lev_a, lev_hi, lev_lo,
-                probe_hi, probe_lo, grid, level, idx)
+                probe_hi, probe_lo, grid, level, idx, one)
     for key in keys:
         if not (m > 1 and lev_a[0] < key < lev_a[m - 1]):
             continue
@@ -359,7 +359,7 @@ def levels(cell, h, chain, nc, peak, valley, probes, keys, acc, lev_a, lev_hi, l
             k += 1
         if lev_a[k] == key:
             continue
-        hi, lo = _level(cell, key, h, chain, nc, peak, valley, acc, level, idx)
+        hi, lo = _level(cell, key, h, chain, nc, peak, valley, acc, level, idx, one)
         if hi < 0.0:
             continue
         for i in range(m, k, -1):
@@ -371,7 +371,7 @@ def levels(cell, h, chain, nc, peak, valley, probes, keys, acc, lev_a, lev_hi, l
 
 @jit
 def _spread(cell, h, chain, nc, peak, valley, probes, acc, lev_a, lev_hi, lev_lo, probe_hi,
-            probe_lo, grid, level, idx):
+            probe_lo, grid, level, idx, one):
     """`levels` but the keys."""
     p_n = probes.size
     scale = acc
@@ -400,11 +400,11 @@ def _spread(cell, h, chain, nc, peak, valley, probes, acc, lev_a, lev_hi, lev_lo
     a0, hi0, lo0 = points[first], probe_hi[first], probe_lo[first]
     if first > 0:
         a0, hi0, lo0 = _refine(cell, h, chain, nc, peak, valley, a0, points[first - 1], hi0,
-                               lo0, ends_a[0], scale, level, idx)
+                               lo0, ends_a[0], scale, level, idx, one)
     a1, hi1, lo1 = points[last], probe_hi[last], probe_lo[last]
     if last < count - 1:
         a1, hi1, lo1 = _refine(cell, h, chain, nc, peak, valley, a1, points[last + 1], hi1,
-                               lo1, ends_a[1], scale, level, idx)
+                               lo1, ends_a[1], scale, level, idx, one)
     m = np.int64(0)  # (a literal 0 compiles _store a second time)
     if count == p_n and last - first + 1 >= p_n // 2:
         if a0 < points[first]:
@@ -424,7 +424,7 @@ def _spread(cell, h, chain, nc, peak, valley, probes, acc, lev_a, lev_hi, lev_lo
         return m
     for k in range(1, p_n - 1):
         a = a0 + width * k / (p_n - 1)
-        hi, lo = _level(cell, a, h, chain, nc, peak, valley, scale, level, idx)
+        hi, lo = _level(cell, a, h, chain, nc, peak, valley, scale, level, idx, one)
         if hi >= 0.0:
             _store(lev_a, lev_hi, lev_lo, m, a, hi, lo)
             m += 1
