@@ -28,7 +28,7 @@ one fails, the cache keeps nothing) leaves the rest to compile in the process, a
 compilation allocates objects by the hundred thousand, and every collection they trigger walks
 all live objects (numba's own among them), about 3.5 s of the butterfly's first conversion
 compiled in one process; held, the garbage of one compilation is collected after it, for about
-40 MB more at the peak there (442 MB against 403 MB). The compile children collect as they go
+36 MB more at the peak there (438 MB against 403 MB). The compile children collect as they go
 (`compile_child`): each holds few objects, and its memory is what decides how much it compiles.
 """
 
