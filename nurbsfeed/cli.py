@@ -12,6 +12,7 @@ errors.py and no traceback (commands.common.reports_errors). SIGINT, SIGTERM and
 from __future__ import annotations
 
 import gc
+import os
 import signal
 import sys
 
@@ -23,6 +24,7 @@ from nurbsfeed.commands.convert import convert
 from nurbsfeed.commands.plan import plan
 from nurbsfeed.commands.progress import watch_compiling
 from nurbsfeed.commands.stops import handle_stop_signals, stop
+from nurbsfeed.commands.warm_up import WarmUp
 from nurbsfeed.errors import Interrupted
 
 
@@ -49,8 +51,12 @@ def run() -> None:
     Stop signals are handled here, in the process's own entry point only (not in a library
     call of `main`): SIGINT, SIGTERM or SIGHUP unwinds the run, removing temporary files, and
     exits with 128 + the signal number (130, 143, 129).
+
+    On the first run after an install the command's kernels compile in child processes
+    (commands.warm_up, `run_compile_child`), whose memory ends with them.
     """
     handle_stop_signals(stop)
+    WarmUp.enabled = True
     watch_compiling()  # (imports numba)
     gc.freeze()
     try:
@@ -61,6 +67,23 @@ def run() -> None:
         remove_live_temporaries()
         click.echo(f"nurbsfeed: stopped by {signal.Signals(exc.signum).name}", err=True)
         sys.exit(exc.exit_code)
+
+
+def run_compile_child(argv: list[str]) -> None:
+    """A compile child's process (nurbsfeed.jit.compile_in_children): `main` on `argv`, a
+    command's warm-up, ending itself once it holds its share of compiled kernels; its exit
+    status is the command's. Everything it wrote goes with it (its temporary folder, /dev/null):
+    it ends without the interpreter's teardown, which would only walk numba's objects."""
+    from nurbsfeed.jit import compile_child
+
+    compile_child()
+    gc.freeze()
+    try:
+        main(argv)
+        status = 0
+    except SystemExit as exc:
+        status = exc.code if isinstance(exc.code, int) else int(exc.code is not None)
+    os._exit(status)
 
 
 if __name__ == "__main__":  # pragma: no cover

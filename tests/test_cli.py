@@ -390,6 +390,46 @@ def test_a_run_from_numbas_cache_writes_what_the_first_run_wrote(tmp_path: Path)
     assert first.read_bytes() == second.read_bytes()
 
 
+@pytest.mark.skipif(not JIT_ENABLED, reason="numba is not in use")
+def test_the_first_run_after_an_install_compiles_in_children_what_later_runs_load(
+        tmp_path: Path) -> None:
+    """An empty numba cache, as after an install: the console script's first compilation has
+    child processes run the warm-up (the butterfly under the same profile, commands.warm_up)
+    and fill the cache, and compiles only what the warm-up did not run (the kernel whose miss
+    started it, among them). It writes the very bytes that the next run, all from the cache,
+    writes, and that this process writes (its kernels compiled here or loaded)."""
+    probe = ("import json, sys\n"
+             "from numba.core import event\n"
+             "here = []\n"
+             "class Seen(event.Listener):\n"
+             "    def on_start(self, ev):\n"
+             "        func = ev.data['dispatcher'].py_func\n"
+             "        if func.__module__.startswith('nurbsfeed.'):\n"
+             "            here.append(func.__qualname__)\n"
+             "    def on_end(self, ev):\n"
+             "        pass\n"
+             "event.register('numba:compile', Seen())\n"
+             "from nurbsfeed.cli import run\n"
+             "sys.argv = ['nurbsfeed', *sys.argv[1:]]\n"
+             "try:\n"
+             "    run()\n"
+             "except SystemExit as exc:\n"
+             "    assert not exc.code, exc.code\n"
+             "print(json.dumps(here))\n")
+    outputs = {name: tmp_path / f"{name}.nc" for name in ("first", "second", "here")}
+    args = ["convert", str(SAMPLES / "quarter-circle.json"), "-m", "paper-table1", "-q", "-o"]
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    compiled = []
+    for name in ("first", "second"):
+        done = subprocess.run([sys.executable, "-c", probe, *args, str(outputs[name])],
+                              env=env, capture_output=True, text=True, check=True)
+        compiled.append(json.loads(done.stdout))
+    assert 1 <= len(compiled[0]) <= 3 and compiled[1] == []  # 47 compiled in the process
+    assert run(*args, str(outputs["here"]))[0] == 0
+    assert outputs["first"].read_bytes() == outputs["second"].read_bytes()
+    assert outputs["first"].read_bytes() == outputs["here"].read_bytes()
+
+
 def test_taylor1_conversions_warn_that_they_can_break_the_limits(tmp_path: Path) -> None:
     out = tmp_path / "t.nc"
     code, _, stderr = run("convert", str(SAMPLES / "quarter-circle.json"), "--method", "taylor1",

@@ -24,6 +24,14 @@ def test_every_package_of_the_tree_is_listed_in_pyproject() -> None:
     assert listed - on_disk == {"nurbsfeed.configs"}
 
 
+def test_the_first_runs_warm_up_curve_ships_and_is_the_butterfly_sample() -> None:
+    from nurbsfeed.commands.warm_up import WARM_UP_CURVE
+
+    data = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    assert WARM_UP_CURVE.name in data["package-data"]["nurbsfeed.commands"]
+    assert WARM_UP_CURVE.read_bytes() == (ROOT / "samples" / "butterfly.json").read_bytes()
+
+
 def test_the_command_line_loads_without_numpy_or_numba_until_a_command_needs_them() -> None:
     # `nurbsfeed --help` / `--version` and click's option parsing must not pay for the
     # pipeline's imports (~0.3 s): they are taken inside the commands

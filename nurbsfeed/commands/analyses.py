@@ -21,6 +21,7 @@ from nurbsfeed.commands.common import (
     method_option,
     reports_errors,
 )
+from nurbsfeed.commands.warm_up import hand_off, profile_options, warm_up
 from nurbsfeed.errors import EXIT_BAD_INPUT, InputError, Location, ProfileError
 from nurbsfeed.machine import machine_from_mapping
 
@@ -46,6 +47,7 @@ def compare(input: Path, dialect: str, repeat: int, as_json: bool, **kwargs: Any
     from nurbsfeed.analysis import compare_file, render_comparison
 
     name = kwargs["machine"]
+    hand_off(warm_up("compare", profile_options(kwargs)))
     result = compare_file(input, machine_from(kwargs), dialect, repeat)
     click.echo(json.dumps(dict(result.as_dict(), machine=name), indent=2) if as_json
                else render_comparison(result, name))
@@ -130,6 +132,7 @@ def plot(input: Path, output: Path, curve_index: int, method: str, dialect: str,
         raise InputError(f"-o would overwrite the input {input}", Location(str(output)))
     output_target(output)  # refused now, not after the run
     name = kwargs["machine"]
+    hand_off(warm_up("plot", [*profile_options(kwargs), "--method", method]))
     block, plan, result = curve_run(input, machine_from(kwargs), method, dialect, curve_index)
     try:
         plotting.plot_run(output, plan, result, run_series(block, plan, result), name)

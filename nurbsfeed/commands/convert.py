@@ -27,6 +27,7 @@ from nurbsfeed.commands.common import (
 )
 from nurbsfeed.commands.pool import convert_in_pool
 from nurbsfeed.commands.progress import Notice, Progress
+from nurbsfeed.commands.warm_up import hand_off, profile_options, warm_up
 from nurbsfeed.errors import EXIT_BAD_INPUT, InputError, Location
 
 TAYLOR1_WARNING = ("nurbsfeed: warning: taylor1 is the paper's first-order baseline; its points "
@@ -55,6 +56,7 @@ TAYLOR1_WARNING = ("nurbsfeed: warning: taylor1 is the paper's first-order basel
 def convert(inputs: tuple[str, ...], output: Path | None, method: str, dialect: str,
             trace: Path | None, jobs: int, quiet: bool, **kwargs: Any) -> None:
     """Convert NURBS programs (G-code or JSON curves) into planned G1 moves."""
+    warm = warm_up("convert", [*profile_options(kwargs), "--method", method])
     machine = machine_from(kwargs)
     sources = expand_inputs(inputs)
     many = len(sources) > 1 or (output is not None and output.is_dir())
@@ -83,9 +85,10 @@ def convert(inputs: tuple[str, ...], output: Path | None, method: str, dialect: 
         click.echo(TAYLOR1_WARNING, err=True)
     try:
         if jobs > 1 and len(sources) > 1:
-            results = convert_in_pool(sources, targets, jobs, progress, machine, method,
+            results = convert_in_pool(sources, targets, jobs, progress, warm, machine, method,
                                       dialect)
         else:
+            hand_off(warm)
             results = []
             for index, (source, target) in enumerate(zip(sources, targets)):
                 results.append(convert_one(source, target, machine, method, dialect, trace,

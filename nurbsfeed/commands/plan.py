@@ -19,6 +19,7 @@ from nurbsfeed.commands.common import (
     machine_options,
     reports_errors,
 )
+from nurbsfeed.commands.warm_up import hand_off, profile_options, warm_up
 from nurbsfeed.errors import EXIT_BAD_INPUT
 
 if TYPE_CHECKING:
@@ -57,6 +58,7 @@ def plan(input: Path, dialect: str, reference: bool, **kwargs: Any) -> None:
         except ImportError:
             click.echo(REFERENCE_NEEDS_SCIPY, err=True)
             sys.exit(EXIT_BAD_INPUT)
+    hand_off(warm_up("plan", profile_options(kwargs)))
     machine = machine_from(kwargs)
     index = 0
     for window in chain_items(read_program(input, dialect), machine):

@@ -18,6 +18,7 @@ from nurbsfeed.commands.progress import (
     watch_compiling,
 )
 from nurbsfeed.commands.stops import handle_stop_signals, stop
+from nurbsfeed.commands.warm_up import hand_off
 from nurbsfeed.errors import EXIT_SIGNAL_BASE, Interrupted
 
 _worker_busy = False  # in a --jobs worker: a file is being converted
@@ -32,10 +33,11 @@ def _worker_stop(signum: int, frame: Any) -> None:
     stop(signum, frame)
 
 
-def _init_worker(notice_shown: Any) -> None:
+def _init_worker(notice_shown: Any, warm_up: list[str] | None, warmed: Any) -> None:
     handle_stop_signals(_worker_stop)
     Notice.quiet, Notice.shared = notice_shown is None, notice_shown
     watch_compiling()
+    hand_off(warm_up, warmed)
 
 
 def _convert_in_worker(*args: Any) -> dict[str, Any]:
@@ -50,20 +52,27 @@ def _convert_in_worker(*args: Any) -> dict[str, Any]:
 
 
 def convert_in_pool(sources: list[Path], targets: list[Path | None], jobs: int,
-                    progress: Progress | None, *args: Any) -> list[dict[str, Any]]:
-    """Convert in `jobs` worker processes; `args`: machine, method, dialect.
+                    progress: Progress | None, warm_up: list[str] | None,
+                    *args: Any) -> list[dict[str, Any]]:
+    """Convert in `jobs` worker processes; `args`: machine, method, dialect. On the first run
+    after an install, the first worker to compile hands it to `warm_up`'s children (see
+    commands.warm_up) and the others wait for them.
 
     A worker that dies (killed, out of memory, a crash in compiled code) breaks the pool and
     fails the files in flight, at most `jobs` of them, since files are handed out one at a time;
     each of those is converted again in a process of its own, so that only a file that kills
     its worker fails, and the rest go on in a new pool.
     """
+    import multiprocessing
+
     results: dict[int, dict[str, Any]] = {}
     todo = list(range(len(sources)))
+    start = (compile_notice_shared(), warm_up,
+             multiprocessing.Value("b", 0) if warm_up is not None else None)
     while todo:
-        lost, todo = _pool_round(todo, jobs, sources, targets, args, results, progress)
+        lost, todo = _pool_round(todo, jobs, sources, targets, args, results, progress, start)
         for index in lost:
-            if _pool_round([index], 1, sources, targets, args, results, progress)[0]:
+            if _pool_round([index], 1, sources, targets, args, results, progress, start)[0]:
                 results[index] = {"source": str(sources[index]), "error": (
                     "internal error: BrokenProcessPool: the worker process converting this "
                     "file died (killed by a signal, or out of memory)")}
@@ -72,10 +81,11 @@ def convert_in_pool(sources: list[Path], targets: list[Path | None], jobs: int,
 
 def _pool_round(todo: list[int], jobs: int, sources: list[Path], targets: list[Path | None],
                 args: tuple[Any, ...], results: dict[int, dict[str, Any]],
-                progress: Progress | None) -> tuple[list[int], list[int]]:
+                progress: Progress | None,
+                start: tuple[Any, ...]) -> tuple[list[int], list[int]]:
     """Convert files `todo` into `results` until done or the pool breaks: (files in flight when
     it broke, files not handed out). The status line moves on as files finish, and its clock
-    every PROGRESS_TICK_S in between."""
+    every PROGRESS_TICK_S in between. `start`: the workers' `_init_worker` arguments."""
     import multiprocessing
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
@@ -83,7 +93,7 @@ def _pool_round(todo: list[int], jobs: int, sources: list[Path], targets: list[P
     waiting = todo[::-1]
     lost: list[int] = []
     with ProcessPoolExecutor(max_workers=min(jobs, len(todo)), initializer=_init_worker,
-                             initargs=(compile_notice_shared(),)) as pool:
+                             initargs=start) as pool:
         try:
             running: dict[Any, int] = {}
             while (waiting or running) and not lost:

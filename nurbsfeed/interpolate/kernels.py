@@ -24,7 +24,7 @@ import math
 from nurbsfeed.choices import METHOD_NAMES
 from nurbsfeed.geometry import kernel
 from nurbsfeed.interpolate.solved_steps import chord_step, leg_step
-from nurbsfeed.jit import inline, jit
+from nurbsfeed.jit import compiles_large, inline, jit
 
 # `_step_run` evaluates the curve up to six times a step: compiled into the loop, not called
 find_span = inline(kernel.find_span)
@@ -83,6 +83,7 @@ def step_spans(method, knots, coef, degree, n_spans, u0, ds, sigma, slow_speed, 
         k += 1
 
 
+@compiles_large(40.0)  # its inlined evaluations: 29-34 MB more at the peak of its compilation
 @jit
 def _step_run(method, knots, coef, degree, n_spans, k0, u0, span0, ds, sigma, slow_speed, u_out,
               p_out):
