@@ -248,9 +248,10 @@ def forward(h, g0, gm, g1, b_knot, b_mid, floors, lims, start_kind, start_p1, st
             nc, peak, valley = chain_of(lev_a[j + 1], lev_hi[j + 1], lev_lo[j + 1],
                                         lev_n[j + 1], hj, chain, idx)
             c = min(b + hj * a, chain[1, peak])
-            lo1, hi1, _, _ = level_interval(chain, 1, nc, peak, c, 1.0, idx)
-            lo2, hi2, _, _ = level_interval(chain, 2, nc, valley, max(c, chain[2, valley]), -1.0,
-                                            idx)
+            # (rows as int64, not literals: a literal compiles level_interval once for each)
+            lo1, hi1, _, _ = level_interval(chain, np.int64(1), nc, peak, c, 1.0, idx)
+            lo2, hi2, _, _ = level_interval(chain, np.int64(2), nc, valley,
+                                            max(c, chain[2, valley]), -1.0, idx)
             low = max(low, (max(lo1, lo2) - a) / hj)
             high = min(high, (min(hi1, hi2) - a) / hj)
             tol = U_TOL_REL * (abs(low) + abs(high) + 1.0)

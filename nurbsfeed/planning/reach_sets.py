@@ -272,7 +272,8 @@ def _level(cell, a, h, chain, nc, peak, valley, scale, level, idx, one):
     """(high, low) at the acceleration a alone: `_probe` at one point; one (3,): scratch (an
     array a call allocates costs more than the search)."""
     one[0] = a
-    _probe(cell, h, chain, nc, peak, valley, one, 1, scale, one[1:], one[2:], level, idx)
+    count = np.int64(1)  # (a literal 1 compiles _probe a second time)
+    _probe(cell, h, chain, nc, peak, valley, one, count, scale, one[1:], one[2:], level, idx)
     return one[1], one[2]
 
 
