@@ -218,8 +218,9 @@ def compile_in_children(command: list[str], shared: Any = None) -> Any:
     Where a child cannot start, fails, or reports a kernel that a child before it compiled (the
     cache kept nothing), the children stop and the rest compiles here. With `shared` (a
     multiprocessing.Value, "b") only the first of the processes that share it starts the
-    children, and the others wait for them (--jobs workers). Once a process. Returns the
-    listener (for `numba.core.event.unregister`); None without numba."""
+    children, and the others wait for them (--jobs workers). It acts once in a process, at its
+    first compilation. Returns the listener (for `numba.core.event.unregister`); None without
+    numba."""
     if not JIT_ENABLED:
         return None
     from numba.core import event

@@ -16,7 +16,7 @@ For one level a the question is one-dimensional in b. With a1 = a + h u the next
 gamma = (upper boundary of K_j+1) - h a1, concave, and gamma_lo likewise, convex (the *chain*
 the knot reads); cell j's rows keep a1 between affine functions of b. The gap between the
 least upper and the greatest lower bound on a1 is concave in b: Newton's method on it from
-outside the feasible interval reaches its ends without crossing them (`_level`), started
+outside the feasible interval reaches its ends without crossing them (`_probe`), started
 from the next knot's boundary at the same acceleration (the sets change little from one knot
 to the next). The levels of a knot span the accelerations its set reaches: probed at given
 accelerations, the ends found by bisection (`levels`).
@@ -59,7 +59,7 @@ def on_side(v, c, sign):
     return v >= c if sign > 0.0 else v <= c
 
 
-FIRST, NEWTON, INNER, BISECT = 0, 1, 2, 3  # the phases of a search in `_level`
+FIRST, NEWTON, INNER, BISECT = 0, 1, 2, 3  # the phases of a search in `_probe`
 
 
 @jit
