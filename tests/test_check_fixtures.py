@@ -4,11 +4,15 @@ both profiles, passes; the new tolerances are tested on both sides."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
+import numpy as np
 import pytest
+from click.testing import CliRunner
 
 from nurbsfeed.analysis import check_files
+from nurbsfeed.cli import main
 from nurbsfeed.machine import load_machine
 from tests.conftest import SAMPLES, convert_each, default_paper_machine
 
@@ -152,3 +156,69 @@ def test_coverage_both_sides(tmp_path: Path) -> None:
     slower.write_text("".join(lines))
     report = check_files(DATA / "quarter-circle.json", slower, fixture_machine())
     assert "coverage" not in violated(report) and "chord-error" in violated(report)
+
+
+CRAWL = DATA / "crawl-few-feed-digits.json"
+FEED_WORD = re.compile(r"F([0-9.]+)")
+
+
+@pytest.fixture(scope="module")
+def crawl_output(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A degree-4 curve with a control point repeated, converted under the default profile: near
+    its degenerate point it crawls, 10 nm moves of up to 5,021 periods at F 0.000169 to 0.0066
+    mm/min, which 6 decimals write with 3 or 4 significant digits (fuzz seed 3116)."""
+    output = tmp_path_factory.mktemp("crawl") / "crawl.nc"
+    result = CliRunner().invoke(main, ["convert", str(CRAWL), "-o", str(output)])
+    assert result.exit_code == 0, result.stderr
+    return output
+
+
+def move_periods(output: Path, feed_offset: float) -> tuple[int, int]:
+    """(whole periods the moves of the output's one curve add up to, each timed by its F word
+    plus feed_offset times half a unit of its last decimal; the periods the comment announces)."""
+    lines = output.read_text().splitlines()
+    announced = int(re.search(r"(\d+) points", next(x for x in lines if "points, period" in x))[1])
+    position, feed, half, total = None, 0.0, 0.0, 0
+    for line in lines:
+        if not line.startswith(("G0 ", "G1 ", "X", "Y", "Z")):
+            continue
+        words = dict(re.findall(r"([XYZ])(-?[0-9.]+)", line))
+        if line.startswith("G0"):
+            position = np.array([float(words.get(a, 0.0)) for a in "XYZ"])
+            continue
+        target = np.array([float(words.get(a, p)) for a, p in zip("XYZ", position)])
+        if (match := FEED_WORD.search(line)) is not None:
+            feed = float(match[1])
+            half = 0.5 * 10.0 ** -len(match[1].partition(".")[2])
+        seconds = float(np.linalg.norm(target - position)) / ((feed + feed_offset * half) / 60.0)
+        total += max(1, round(seconds / 1e-3))
+        position = target
+    return total, announced - 1
+
+
+def test_a_crawls_period_total_is_held_within_its_f_words_rounding(crawl_output: Path) -> None:
+    """Read as written, the crawl's F words time its moves 6 periods past the 157,058 announced;
+    as they are rounded, they allow it. check passes the output and says so in a note."""
+    as_written, announced = move_periods(crawl_output, 0.0)
+    fastest, _ = move_periods(crawl_output, 1.0)
+    slowest, _ = move_periods(crawl_output, -1.0)
+    assert as_written > announced and fastest <= announced <= slowest
+    report = check_files(CRAWL, crawl_output, load_machine("default"))
+    assert not report.violations, report.violations
+    assert any(f"the moves cover {as_written} periods as their F words read, {fastest} to "
+               f"{slowest} as they are rounded" in note for note in report.notes), report.notes
+
+
+def test_a_crawl_move_timed_past_its_f_words_rounding_fails(crawl_output: Path,
+                                                            tmp_path: Path) -> None:
+    """The crawl's slowest move (F0.000169: 10 nm in 3.55 s) written at twice its feed: 1,775
+    periods fewer, far beyond what rounding its F allows."""
+    lines = crawl_output.read_text().splitlines(keepends=True)
+    feeds = [(float(m[1]), k) for k, x in enumerate(lines) if (m := FEED_WORD.search(x))]
+    feed, k = min(feeds)
+    lines[k] = FEED_WORD.sub(f"F{2.0 * feed:.6f}", lines[k])
+    faster = tmp_path / "faster.nc"
+    faster.write_text("".join(lines))
+    report = check_files(CRAWL, faster, load_machine("default"))
+    assert "period-total" in violated(report)
+    assert any("moves are missing" in v.message for v in report.violations)

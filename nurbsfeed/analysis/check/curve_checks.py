@@ -213,9 +213,10 @@ def check_section(section: Section, block: CurveBlock, machine: Machine,
                          f"no move written but the curve is {length:.4g} mm long")
         return
 
-    axes, feed_words, lines = decode_moves(section, findings)
+    axes, feed_words, feed_units, lines = decode_moves(section, findings)
     axes *= mm_per_unit
     feed_words *= mm_per_unit
+    feed_units *= mm_per_unit
     if np.isnan(feed_words[0]):
         findings.add("feed-word", int(lines[0]), "the first move has no F word (it would run at "
                      "the program's modal feed)")
@@ -226,9 +227,11 @@ def check_section(section: Section, block: CurveBlock, machine: Machine,
     for k in range(len(lines)):
         pos[k + 1] = np.where(np.isnan(axes[k]), pos[k], axes[k])
     feed_mm_min = feed_words.copy()
+    feed_unit_mm_min = feed_units.copy()
     for k in range(1, feed_mm_min.size):
         if np.isnan(feed_mm_min[k]):
             feed_mm_min[k] = feed_mm_min[k - 1]
+            feed_unit_mm_min[k] = feed_unit_mm_min[k - 1]
     step_mm = np.linalg.norm(np.diff(pos, axis=0), axis=1)
     for still in np.flatnonzero(step_mm == 0.0):
         findings.add("zero-length", int(lines[still]), "move does not move (same point as the "
@@ -237,8 +240,8 @@ def check_section(section: Section, block: CurveBlock, machine: Machine,
     # the periods a move from or into a rest may span (profile key rest_move_s), as the
     # pipeline counts them
     rest_periods = max(1, math.ceil(machine.rest_move_s / period * (1.0 - FLOOR_MARGIN)))
-    t_s = _check_timing(section, block, lim, r, step_mm, feed_mm_min, lines, rest_periods,
-                        findings)
+    t_s = _check_timing(section, block, lim, r, step_mm, feed_mm_min, feed_unit_mm_min, lines,
+                        rest_periods, findings)
     point_lines = np.concatenate([[section.comment_line], lines])
 
     # ---- geometry: project every point, deviation, ends, chord error, coverage ----
@@ -280,15 +283,26 @@ def check_section(section: Section, block: CurveBlock, machine: Machine,
 
 
 def _check_timing(section: Section, block: CurveBlock, lim: Limits, r: float,
-                  step_mm: np.ndarray, feed_mm_min: np.ndarray, lines: np.ndarray,
-                  rest_periods: int, findings: Findings) -> np.ndarray:
+                  step_mm: np.ndarray, feed_mm_min: np.ndarray, feed_unit_mm_min: np.ndarray,
+                  lines: np.ndarray, rest_periods: int, findings: Findings) -> np.ndarray:
     """Segment times, multi-period moves, period total and cycle time; returns the time of every
-    point (M+1,) on the period grid."""
+    point (M+1,) on the period grid.
+
+    An F word is its feed to within half a unit of its last decimal (feed_unit_mm_min). Where F
+    keeps few significant digits (a crawl at micrometres a minute, at the writer's cap on
+    decimals) a move of thousands of periods is timed by it only to a few periods: the period
+    total holds if some count each move's F allows adds up to the announced one."""
     period = lim.period_s
+    half_unit = 0.5 * np.nan_to_num(feed_unit_mm_min)
     with np.errstate(divide="ignore", invalid="ignore"):
         seconds = step_mm / (feed_mm_min / 60.0)
-    usable = np.isfinite(seconds) & (seconds > 0.0)
-    n_periods = np.where(usable, np.maximum(1, np.rint(seconds / period)), 1).astype(np.int64)
+        seconds_least = step_mm / ((feed_mm_min + half_unit) / 60.0)
+        # a positive F word is at least one unit of its last decimal, so above half of one
+        seconds_most = step_mm / ((feed_mm_min - half_unit) / 60.0)
+        usable = np.isfinite(seconds) & (seconds > 0.0)
+        n_periods, n_least, n_most = (
+            np.where(usable, np.maximum(1, np.rint(t / period)), 1).astype(np.int64)
+            for t in (seconds, seconds_least, seconds_most))
     off_pct = np.where(usable, 100.0 * np.abs(seconds - n_periods * period)
                        / (n_periods * period), 0.0)
     findings.measure("segment-time", off_pct[usable], 100.0 * SEGMENT_TIME_REL_TOL, 0.0,
@@ -300,15 +314,21 @@ def _check_timing(section: Section, block: CurveBlock, lim: Limits, r: float,
         skipped_cap[at_rest], lim.jerk_mm_s3 * (n_periods[at_rest] * period) ** 3 / 6.0 + 2.0 * r)
     findings.measure("skipped-periods", step_mm[multi], skipped_cap[multi], 0.0, lines[multi])
     total = int(n_periods.sum())
+    least, most = int(n_least.sum()), int(n_most.sum())
+    span = "" if least == most else f" ({least} to {most} as their F words are rounded)"
     announced = section.n_points - 1
-    if total > announced:
+    if least > announced:
         findings.add("period-total", int(lines[-1]),
-                     f"the moves cover {total} periods, the comment announces "
+                     f"the moves cover {total} periods{span}, the comment announces "
                      f"{section.n_points} points ({announced} periods)")
-    elif total < announced - 1:
+    elif most < announced - 1:
         findings.add("period-total", int(lines[-1]),
-                     f"the moves cover {total} periods, the comment announces "
+                     f"the moves cover {total} periods{span}, the comment announces "
                      f"{section.n_points} points ({announced} periods): moves are missing")
+    elif total > announced:
+        findings.notes.append(f"curve {section.index}: the moves cover {total} periods as their "
+                              f"F words read, {least} to {most} as they are rounded; the "
+                              f"comment announces {announced}")
     elif total < announced:
         findings.notes.append(f"curve {section.index}: the moves cover {total} of the "
                               f"{announced} announced periods: the last point rounds onto the "

@@ -230,12 +230,14 @@ def _parse_section(lines: list[str], i: int, section: Section, block: CurveBlock
 
 
 def decode_moves(section: Section, findings: Findings
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Decode the moves: X/Y/Z words (M, 3) as NaN where not written, F (M,) (NaN: modal), line
-    numbers (M,); number-format violations are recorded on the way."""
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Decode the moves: X/Y/Z words (M, 3) as NaN where not written, F (M,) (NaN: modal), the
+    unit of each F word's last decimal as written (M,) (NaN where F is modal: F1.5 is 0.1),
+    line numbers (M,); number-format violations are recorded on the way."""
     m = len(section.moves)
     axes = np.full((m, 3), np.nan)
     feed = np.full(m, np.nan)
+    feed_unit = np.full(m, np.nan)
     lines = np.array([line for line, _ in section.moves], dtype=np.int64)
     for k, (line, text) in enumerate(section.moves):
         for letter, value in WORD_RE.findall(body(text)):
@@ -256,6 +258,7 @@ def decode_moves(section: Section, findings: Findings
                 if number <= 0.0:
                     findings.add("zero-feed", line, f"F{value}: a G1 move needs a positive feed")
                 feed[k] = number
+                feed_unit[k] = 10.0 ** -len(value.partition(".")[2])
             else:
                 axes[k, "XYZ".index(letter)] = number
-    return axes, feed, lines
+    return axes, feed, feed_unit, lines
