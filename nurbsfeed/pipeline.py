@@ -191,7 +191,8 @@ def convert_window(window: ChainWindow, index: int, out: BinaryIO, machine: Mach
     n_points = 1 + plan.n_periods
     period_s = plan.limits.period_s
     guard = MotionGuard(dataclasses.replace(plan.limits,
-                                            feed_mm_s=feed_cap_mm_s(plan.limits, block)), label)
+                                            feed_mm_s=feed_cap_mm_s(plan.limits, block)), label,
+                        method)
     eol = block.eol.encode("ascii")
     if block.rapid_to_start:
         out.write(rapid_line(block.curve.points[0], machine.decimals, block.units).encode("ascii")

@@ -38,6 +38,8 @@ GUARD_FEED_REL = 1e-3  # a wild move is far above; a stepping error of 1e-4 is n
 GUARD_ACC_REL = 0.05
 GUARD_JERK_REL = 0.05
 GUARD_ABS_MM = 1e-9
+DRIFT_REFUSAL = ("taylor1's points drift off the planned feed, which the limits do not allow "
+                 "here: use rk2c")
 # `_difference_maxima`'s (13,) result: whether every point is finite (1 or 0); then for k = 1,
 # 2, 3 the largest norm of a k-th difference (k = 2: P_k+1 - 2 P_k + P_k-1, as the guard takes
 # it; k = 1, 3: as np.diff takes them) and the largest absolute k-th difference of each axis
@@ -164,8 +166,13 @@ class MotionGuard:
     first point at fault and says what it would do; both readings compute the same numbers, so
     the second always refuses (should it not, the curve is refused all the same)."""
 
-    def __init__(self, lim: Limits, curve_label: str) -> None:
+    def __init__(self, lim: Limits, curve_label: str, method: str = "rk2c") -> None:
         period = lim.period_s
+        # what a refusal tells the user: the first-order baseline's points drift off the
+        # planned feed by its nature (the convert command warns of it); any other method's
+        # refusal is a defect to report
+        self.why = (DRIFT_REFUSAL if method == "taylor1"
+                    else "a safety check: please report this curve")
         self.max_step_mm = lim.feed_mm_s * period * (1.0 + GUARD_FEED_REL) + GUARD_ABS_MM
         acc = math.hypot(lim.acc_mm_s2, lim.normal_acc_mm_s2)
         self.max_turn_mm = acc * period**2 * (1.0 + GUARD_ACC_REL) + 4.0 * GUARD_ABS_MM
@@ -236,7 +243,7 @@ class MotionGuard:
                 problem = (f"would accelerate at {size / self.period_s**2:.6g} mm/s^2, above "
                            f"the profile's {self.acc_mm_s2:.6g} mm/s^2 (tangential and normal)")
             raise CurveError(f"{self.label}: refused, point {at} {problem}; nothing was "
-                             f"written (a safety check: please report this curve)")
+                             f"written ({self.why})")
         if self.path:
             self._check_path(points)
 
@@ -270,7 +277,7 @@ class MotionGuard:
                 worst = (i + k - held, problem)
         if worst is not None:
             raise CurveError(f"{self.label}: refused, point {self.seen + worst[0]} {worst[1]}; "
-                             f"nothing was written (a safety check: please report this curve)")
+                             f"nothing was written ({self.why})")
 
 
 class PointReader:

@@ -215,7 +215,8 @@ def _write(planned: _Planned, out: ChainOutput, index: int, upto: int | None,
         out.writer = MoveWriter(out.out, machine.decimals, machine.feed_decimals, period_s,
                                 block.eol, block.curve.points[0], block.units)
         out.guard = MotionGuard(dataclasses.replace(
-            plan.limits, feed_mm_s=feed_cap_mm_s(plan.limits, block)), block.curve.name)
+            plan.limits, feed_mm_s=feed_cap_mm_s(plan.limits, block)), block.curve.name,
+            out.method)
         if out.rest_periods:
             out.rest = RestMoves(block.curve, plan.limits.chord_mm, out.rest_periods)
     if out.rest is not None:

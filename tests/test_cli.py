@@ -440,6 +440,21 @@ def test_taylor1_conversions_warn_that_they_can_break_the_limits(tmp_path: Path)
     assert stderr == ""
 
 
+def test_a_taylor1_refusal_names_its_drift_not_a_defect(tmp_path: Path) -> None:
+    """The circle under the default profile: taylor1's points, slowed as far as the verification
+    goes, still jerk 37 % over the Y axis's limit; the refusal says why and what to use, where
+    another method's would ask for a report."""
+    out = tmp_path / "t.nc"
+    code, _, stderr = run("convert", str(SAMPLES / "circle.json"), "--method", "taylor1",
+                          "-o", str(out), "-q")
+    assert code == 2 and not out.exists()
+    message = stderr.splitlines()[-1]
+    assert message.startswith(f"{SAMPLES / 'circle.json'}:1:47: curve 0 \"circle\": refused, ")
+    assert message.endswith("(taylor1's points drift off the planned feed, which the limits "
+                            "do not allow here: use rk2c)")
+    assert run("convert", str(SAMPLES / "circle.json"), "-o", str(out), "-q")[0] == 0
+
+
 def _under_a_terminal(*args: str) -> tuple[int, str]:
     """Run `nurbsfeed` with stderr on a pseudo-terminal: (exit code, everything it showed)."""
     import pty
