@@ -321,3 +321,24 @@ def test_a_reversal_just_before_a_corner_knot_is_a_stop(tmp_path: Path, name: st
     assert flips.size >= 2 and abs(flips[1] - corner) <= 1e-6
     assert 0 < corner - flips[0] < 0.1 * (curve.u_max - curve.u_min)
     assert_stops_at_and_check_passes(source, curve, flips, tmp_path)
+
+
+def test_a_reversal_just_after_a_zero_of_c_prime_at_a_knot_is_a_stop(tmp_path: Path) -> None:
+    """Fuzzer find (seed 57, gcode-5700174-120): a rational cubic comes to rest at its knot
+    1/3 (C' = 0 there, a cusp at (0, 0.25)), leaves it down the Y axis and turns back up at
+    u = 0.3718, before the first sample after the knot (0.375) has come back past the knot's
+    position: the chord from the knot to that sample still points the way the curve left, so
+    no chord showed the reversal, only the sample's tangent, up the axis. It was passed at
+    1 mm/s (a jerk vector of 1.7e6 mm/s^3 from the points), and the motion guard refused the
+    valid program however far it was slowed. Every sign change of y'(u) on the Y axis, found
+    here by dense sampling, must be a stop node."""
+    source = CASES / "reversal-just-after-a-zero-at-a-knot.ngc"
+    curve = next(item.curve for item in read_program(source) if hasattr(item, "curve"))
+    knot = np.unique(curve.knots)[1]
+    u = np.linspace(knot, np.unique(curve.knots)[2], 2_000_001)[1:]
+    position, derivative = curve.derivatives(u)[:2]
+    assert np.all(position[:, 0] == 0.0)  # on the Y axis after the knot
+    dy = derivative[:, 1]
+    flips = u[np.flatnonzero(np.sign(dy[:-1]) * np.sign(dy[1:]) < 0)]
+    assert flips.size == 1 and 0.0 < flips[0] - knot < 0.375 - knot
+    assert_stops_at_and_check_passes(source, curve, np.concatenate([[knot], flips]), tmp_path)

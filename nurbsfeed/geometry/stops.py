@@ -445,7 +445,12 @@ def stop_candidates(knots, coef, degree, breaks, u, speed, pts, tangent, zero_sp
             sign = 1.0 if side == 0 else -1.0  # chord in the direction of travel
             cx, cy, cz = (px - pts[at, 0]) * sign, (py - pts[at, 1]) * sign, (
                 pz - pts[at, 2]) * sign
-            if norm > 0.0 and dx * cx + dy * cy + dz * cz < -floor_mm * norm:
+            # or the sample's own tangent against that way: the curve turned back between
+            # them but has not come back past the knot by the sample (a reversal 0.04 of the
+            # span after a zero of C' at the knot), which no chord shows
+            against = (speed[at] > zero_speed and dx * tangent[at, 0] + dy * tangent[at, 1]
+                       + dz * tangent[at, 2] < 0.0)
+            if norm > 0.0 and (dx * cx + dy * cy + dz * cz < -floor_mm * norm or against):
                 if side == 0:  # C' at the sample before is the way it goes at low
                     tx, ty, tz = tangent[at, 0], tangent[at, 1], tangent[at, 2]
                 else:
