@@ -9,6 +9,7 @@ tangent against its limit."""
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 
 import numpy as np
@@ -41,6 +42,7 @@ from nurbsfeed.planning.reach_pass import (
 )
 from nurbsfeed.planning.reach_rows import B_FLOOR, ROWS_PER_CELL, cell_rows, jerk_tangent
 from tests.bench.dense_curves import axis_bend, axis_toolpaths
+from tests.conftest import ROOT
 
 DEFAULT = load_machine("default")
 # a cubic out of the plane (the normal jerk's polygon rows), 30 mm: 114 cells under the default
@@ -663,3 +665,22 @@ def test_a_set_narrower_than_the_fine_probes_is_found() -> None:
     plan = plan_curve(curve, dataclasses.replace(lim, feed_mm_s=min(feed, lim.feed_mm_s)))
     assert plan.planner == "optimal"
     assert plan.cycle_time_s < 3.6
+
+
+@pytest.mark.parametrize("feed_mm_min", [6.84, 10.0])
+def test_cells_cut_for_time_keep_the_faster_schedule(feed_mm_min: float) -> None:
+    """Fuzz seed 3116's degree-4 curve at a few mm/min: its 14 um hairpin (|C'| 7.5 % of its
+    mean) is passed at rest, and the first schedule dwells in one cell beside it; on the cells
+    cut there the plan crept into the rest cell at 4e-5 mm/s, 14 s more (111.0 s at F10). The
+    motion cruises at the feed but for milliseconds either side of the rest: its cycle is the
+    length over the feed, within 0.2 %."""
+    spec = json.loads((ROOT / "tests" / "data" / "check" / "crawl-few-feed-digits.json")
+                      .read_text())["curves"][0]
+    curve = NurbsCurve.build(spec["degree"], np.array(spec["knots"], dtype=float),
+                             np.array(spec["control_points"]), np.array(spec["weights"]), "crawl")
+    feed = feed_mm_min / 60.0
+    plan = plan_curve(curve, load_machine("default").limits, np.array([curve.u_min]),
+                      np.array([feed]))
+    length = quad(lambda u: float(np.linalg.norm(curve.derivatives(np.array([u]))[1][0])),
+                  curve.u_min, curve.u_max, points=list(np.unique(curve.knots)), limit=200)[0]
+    assert length / feed <= plan.cycle_time_s <= 1.002 * length / feed
