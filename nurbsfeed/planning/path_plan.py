@@ -159,8 +159,9 @@ def plan_path(curve: NurbsCurve, grid: Grid, lim: Limits, limit: np.ndarray, cap
     if not schedule.solved:
         return None
     # the fastest schedule that breaks no limit between a cell's points is kept: cells cut for
-    # the time spent in them are cut to win time, and a plan on them can lose it (a 14 um
-    # hairpin at F10 mm/min, passed at rest, was crept into for 14 s on its cut cells)
+    # the time spent in them are cut to win time, and a plan on them can lose it (beside a
+    # 14 um hairpin passed at rest at F10 mm/min, the plan on the cut cells creeps into the
+    # rest cell for 14 s)
     kept = None if schedule.broken_between.any() or moving.any() else (layout, schedule)
     for _ in range(RECUTS_MOVING if moving.any() else RECUTS):
         times = np.empty(layout.cells.shape[0] + 2 * layout.first.size)
