@@ -674,7 +674,7 @@ def test_cells_cut_for_time_keep_the_faster_schedule(feed_mm_min: float) -> None
     cut there the plan crept into the rest cell at 4e-5 mm/s, 14 s more (111.0 s at F10). The
     motion cruises at the feed but for milliseconds either side of the rest: its cycle is the
     length over the feed, within 0.2 %."""
-    spec = json.loads((ROOT / "tests" / "data" / "check" / "crawl-few-feed-digits.json")
+    spec = json.loads((ROOT / "tests" / "data" / "path_planner" / "hairpin-at-rest-low-feed.json")
                       .read_text())["curves"][0]
     curve = NurbsCurve.build(spec["degree"], np.array(spec["knots"], dtype=float),
                              np.array(spec["control_points"]), np.array(spec["weights"]), "crawl")

@@ -325,7 +325,7 @@ def _check_timing(section: Section, block: CurveBlock, lim: Limits, r: float,
         findings.add("period-total", int(lines[-1]),
                      f"the moves cover {total} periods{span}, the comment announces "
                      f"{section.n_points} points ({announced} periods): moves are missing")
-    elif total > announced:
+    elif not announced - 1 <= total <= announced:
         findings.notes.append(f"curve {section.index}: the moves cover {total} periods as their "
                               f"F words read, {least} to {most} as they are rounded; the "
                               f"comment announces {announced}")
