@@ -213,10 +213,10 @@ def check_section(section: Section, block: CurveBlock, machine: Machine,
                          f"no move written but the curve is {length:.4g} mm long")
         return
 
-    axes, feed_words, feed_units, lines = decode_moves(section, findings)
+    axes, feed_words, feed_unit_mm_min, lines = decode_moves(section, findings)
     axes *= mm_per_unit
     feed_words *= mm_per_unit
-    feed_units *= mm_per_unit
+    feed_unit_mm_min *= mm_per_unit
     if np.isnan(feed_words[0]):
         findings.add("feed-word", int(lines[0]), "the first move has no F word (it would run at "
                      "the program's modal feed)")
@@ -227,7 +227,6 @@ def check_section(section: Section, block: CurveBlock, machine: Machine,
     for k in range(len(lines)):
         pos[k + 1] = np.where(np.isnan(axes[k]), pos[k], axes[k])
     feed_mm_min = feed_words.copy()
-    feed_unit_mm_min = feed_units.copy()
     for k in range(1, feed_mm_min.size):
         if np.isnan(feed_mm_min[k]):
             feed_mm_min[k] = feed_mm_min[k - 1]
